@@ -1,1 +1,33 @@
+//! SODA: deterministic, optimistic (Time Warp) parallel simulation of rigid bodies on a
+//! uniform spatial grid.
+//!
+//! Layers, lowest first (a lower layer never imports a higher one):
+//! - [`math`], [`grid`], [`physics`]: pure computation — vectors, the uniform grid, the
+//!   rigid-body cell model;
+//! - [`model`], [`state`], [`hash`], [`frame`]: the seam between a kernel and a cell model,
+//!   the per-cell state of the whole domain, the canonical state hash, committed frames;
+//! - [`exec`]: executors (the single-threaded reference run);
+//! - [`scene`]: scene description, builder, built-in scenes and scene files (the only layer
+//!   that reads files, besides the binary).
+//!
+//! SPEC.md is the precise contract.
 
+pub mod exec;
+pub mod frame;
+pub mod grid;
+pub mod hash;
+pub mod math;
+pub mod model;
+pub mod physics;
+pub mod scene;
+pub mod sim;
+pub mod state;
+
+pub use exec::reference::ReferenceRun;
+pub use frame::{Event, EventKind, Frame};
+pub use grid::{CellCoord, Grid};
+pub use hash::StateHash;
+pub use model::{BodyId, CellModel, Neighbourhood, Step};
+pub use physics::{Body, RigidBodyModel, Shape};
+pub use scene::{Scene, SceneBuilder, SceneError};
+pub use sim::{RunReport, Simulation, StateReport};

@@ -1,0 +1,20 @@
+//! Development probe: runs a built-in scene and prints measurements every second.
+use soda::scene::builtin::builtin;
+use soda::sim::{measure, Simulation};
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let name = args.get(1).map(String::as_str).unwrap_or("falling-cubes");
+    let n: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1000);
+    let steps: u64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(600);
+    let scene = builtin(name, Some(n), 0).expect("scene");
+    let mut sim = Simulation::new(scene);
+    let t = std::time::Instant::now();
+    for s in 0..steps {
+        sim.step();
+        if (s + 1) % 60 == 0 {
+            let r = measure(sim.reference());
+            println!("t={:5.1}s bodies={} ke={:.3} vmax={:.3} pen={:.4} ymin={:.3} ymax={:.3} wall={:.2}s", (s + 1) as f32 / 60.0, r.bodies, r.kinetic_energy, r.max_speed, r.max_penetration, r.min_height, r.max_height, t.elapsed().as_secs_f32());
+        }
+    }
+}

@@ -1,0 +1,4 @@
+//! Executors: ways of running a cell model over the grid. Each yields the same committed
+//! frames; the reference is the oracle.
+
+pub mod reference;

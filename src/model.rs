@@ -1,0 +1,75 @@
+//! The seam between a kernel and a cell model: the kernel moves opaque entity states
+//! between cells and asks the model to step one cell from its 27-cell neighbourhood.
+//! The kernel never knows it is running physics.
+
+use crate::frame::Event;
+use crate::grid::{CellCoord, Grid};
+use crate::hash::StateHash;
+use std::fmt::Debug;
+
+/// Virtual time: a step number. Step `t` is followed by step `t + 1`, `dt` seconds later.
+pub type Step = u64;
+
+/// The identity of an entity (a body). Canonical order everywhere is ascending id.
+pub type BodyId = u64;
+
+/// The states of the entities homed in the 27 cells around a centre cell at one step.
+///
+/// Slot `k` holds cell `centre + offset(k)` with offsets in lexicographic `(dz, dy, dx)`
+/// order, each in `-1..=1`; slot 13 is the centre. Every slot is sorted by id. Cells
+/// outside the grid are empty slots.
+pub struct Neighbourhood<'a, S> {
+    /// The centre cell.
+    pub centre: CellCoord,
+    /// The 27 slots, see the type's doc.
+    pub cells: [&'a [S]; 27],
+}
+
+impl<'a, S> Neighbourhood<'a, S> {
+    /// Index of the centre slot.
+    pub const CENTRE: usize = 13;
+
+    /// The offset `(dx, dy, dz)` of slot `k`.
+    pub fn offset(k: usize) -> [i32; 3] {
+        let k = k as i32;
+        [k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1]
+    }
+
+    /// The entities homed in the centre cell.
+    pub fn own(&self) -> &'a [S] {
+        self.cells[Self::CENTRE]
+    }
+
+    /// All entities of the neighbourhood, slot by slot (not globally id-sorted).
+    pub fn iter(&self) -> impl Iterator<Item = &'a S> + '_ {
+        self.cells.iter().flat_map(|c| c.iter())
+    }
+}
+
+/// A deterministic cell model (DESIGN.md §3): stepping a cell is a pure function of the
+/// step-`t` states of its 27-cell neighbourhood and the model's static data.
+pub trait CellModel: Send + Sync {
+    /// The state of one entity, moved between cells and worlds by the kernel.
+    type State: Clone + PartialEq + Debug + Send + Sync + 'static;
+
+    /// The entity's id.
+    fn id(state: &Self::State) -> BodyId;
+
+    /// The point that decides the entity's home cell.
+    fn position(state: &Self::State) -> [f32; 3];
+
+    /// Computes the step-`t + 1` states of the entities homed in `nb.centre` at step `t`,
+    /// appending them to `out` in ascending id order, and any events to `events`.
+    /// Must read nothing but `nb`, `grid` and the model's static data.
+    fn step_cell(
+        &self,
+        step: Step,
+        grid: &Grid,
+        nb: &Neighbourhood<'_, Self::State>,
+        out: &mut Vec<Self::State>,
+        events: &mut Vec<Event>,
+    );
+
+    /// Feeds every bit of the state that matters into the canonical hash.
+    fn hash_state(state: &Self::State, hasher: &mut StateHash);
+}

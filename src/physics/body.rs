@@ -1,0 +1,179 @@
+//! A rigid body's shape, material and dynamic state.
+
+use crate::math::{pose, Pose, Quat, Vec3};
+use crate::model::BodyId;
+use parry3d::shape::{Ball, Cuboid, Shape as ParryShape};
+use serde::{Deserialize, Serialize};
+
+/// A body's collision shape (its own frame: centred on the centre of mass).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Shape {
+    /// A sphere.
+    Ball {
+        /// Radius in metres.
+        radius: f32,
+    },
+    /// A box.
+    Cuboid {
+        /// Half extents along the body's x, y, z axes, in metres.
+        half_extents: [f32; 3],
+    },
+}
+
+/// A parry3d shape built on the stack from a [`Shape`].
+pub(crate) enum Parry {
+    Ball(Ball),
+    Cuboid(Cuboid),
+}
+
+impl Parry {
+    pub(crate) fn as_dyn(&self) -> &dyn ParryShape {
+        match self {
+            Parry::Ball(b) => b,
+            Parry::Cuboid(c) => c,
+        }
+    }
+}
+
+impl Shape {
+    /// Radius of the smallest sphere about the centre that holds the shape.
+    pub fn bounding_radius(&self) -> f32 {
+        match *self {
+            Shape::Ball { radius } => radius,
+            Shape::Cuboid { half_extents: h } => Vec3::from(h).norm(),
+        }
+    }
+
+    /// Volume in m³.
+    pub fn volume(&self) -> f32 {
+        match *self {
+            Shape::Ball { radius } => 4.0 / 3.0 * std::f32::consts::PI * radius.powi(3),
+            Shape::Cuboid { half_extents: h } => 8.0 * h[0] * h[1] * h[2],
+        }
+    }
+
+    /// Principal moments of inertia per unit mass, in the body frame.
+    pub fn unit_inertia(&self) -> Vec3 {
+        match *self {
+            Shape::Ball { radius } => Vec3::repeat(0.4 * radius * radius),
+            Shape::Cuboid { half_extents: h } => {
+                let (x2, y2, z2) = (h[0] * h[0], h[1] * h[1], h[2] * h[2]);
+                Vec3::new(y2 + z2, x2 + z2, x2 + y2) / 3.0
+            }
+        }
+    }
+
+    pub(crate) fn parry(&self) -> Parry {
+        match *self {
+            Shape::Ball { radius } => Parry::Ball(Ball::new(radius)),
+            Shape::Cuboid { half_extents: h } => Parry::Cuboid(Cuboid::new(Vec3::from(h))),
+        }
+    }
+
+    /// The shape's vertices in its own frame (empty for a ball).
+    pub fn vertices(&self) -> Vec<Vec3> {
+        match *self {
+            Shape::Ball { .. } => Vec::new(),
+            Shape::Cuboid { half_extents: h } => (0..8)
+                .map(|k| {
+                    Vec3::new(
+                        if k & 1 == 0 { -h[0] } else { h[0] },
+                        if k & 2 == 0 { -h[1] } else { h[1] },
+                        if k & 4 == 0 { -h[2] } else { h[2] },
+                    )
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Bulk and surface properties of a body.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Material {
+    /// Density in kg/m³.
+    pub density: f32,
+    /// Coulomb friction coefficient (static and dynamic).
+    pub friction: f32,
+    /// Coefficient of restitution, 0 (plastic) to 1 (elastic).
+    pub restitution: f32,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            density: 1.0,
+            friction: 0.5,
+            restitution: 0.0,
+        }
+    }
+}
+
+/// A dynamic rigid body: identity, constant properties and the state at one step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Body {
+    /// Unique id; the canonical order.
+    pub id: BodyId,
+    /// Collision shape.
+    pub shape: Shape,
+    /// 1 / mass.
+    pub inv_mass: f32,
+    /// Inverse principal moments of inertia, body frame.
+    pub inv_inertia: Vec3,
+    /// Coulomb friction coefficient.
+    pub friction: f32,
+    /// Restitution coefficient.
+    pub restitution: f32,
+    /// Centre of mass, world frame.
+    pub position: Vec3,
+    /// Orientation.
+    pub rotation: Quat,
+    /// Linear velocity, m/s.
+    pub linvel: Vec3,
+    /// Angular velocity, rad/s, world frame.
+    pub angvel: Vec3,
+}
+
+impl Body {
+    /// A body at rest with mass and inertia from `material.density`.
+    pub fn new(
+        id: BodyId,
+        shape: Shape,
+        material: Material,
+        position: Vec3,
+        rotation: Quat,
+    ) -> Body {
+        let mass = material.density * shape.volume();
+        let inertia = shape.unit_inertia() * mass;
+        Body {
+            id,
+            shape,
+            inv_mass: 1.0 / mass,
+            inv_inertia: inertia.map(|i| 1.0 / i),
+            friction: material.friction,
+            restitution: material.restitution,
+            position,
+            rotation,
+            linvel: Vec3::zeros(),
+            angvel: Vec3::zeros(),
+        }
+    }
+
+    /// The body's pose.
+    pub fn pose(&self) -> Pose {
+        pose(self.position, self.rotation)
+    }
+
+    /// Mass in kg.
+    pub fn mass(&self) -> f32 {
+        1.0 / self.inv_mass
+    }
+
+    /// Kinetic energy (translation + rotation), J.
+    pub fn kinetic_energy(&self) -> f32 {
+        let w = self.rotation.inverse() * self.angvel;
+        let rot: f32 = (0..3).map(|k| w[k] * w[k] / self.inv_inertia[k]).sum();
+        0.5 * self.mass() * self.linvel.norm_squared() + 0.5 * rot
+    }
+}

@@ -1,0 +1,205 @@
+//! Contact generation at step-`t` poses. A pair's manifold is computed with the lower id as
+//! the first shape, so both bodies of a pair see the same geometry whichever cell computes it.
+
+use super::body::{Body, Shape};
+use super::environment::Environment;
+use crate::math::Vec3;
+use crate::model::BodyId;
+use parry3d::query::{ContactManifold, DefaultQueryDispatcher, PersistentQueryDispatcher};
+use smallvec::SmallVec;
+
+/// One contact point as seen by the body being solved (`i`), fixed for the whole step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContactPoint {
+    /// The point on body `i`, in `i`'s own frame.
+    pub anchor: Vec3,
+    /// The partner's surface point at step `t`, world frame.
+    pub partner_point: Vec3,
+    /// The velocity of the partner's point at step `t` (zero for static surfaces).
+    pub partner_velocity: Vec3,
+    /// Unit normal from the partner towards `i`, world frame.
+    pub normal: Vec3,
+    /// The partner's generalised inverse mass along `normal` at the point (0 if static).
+    pub partner_inv_mass: f32,
+}
+
+/// The contact points between body `i` and one partner.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContactSet {
+    /// The partner body, or `None` for the static environment.
+    pub partner: Option<BodyId>,
+    /// Combined friction coefficient.
+    pub friction: f32,
+    /// Combined restitution.
+    pub restitution: f32,
+    /// The points.
+    pub points: SmallVec<[ContactPoint; 4]>,
+}
+
+/// A pair manifold between bodies `a` (lower id) and `b`, in world frame.
+#[derive(Clone, Debug)]
+pub(crate) struct PairManifold {
+    /// (point on a, point on b) in each body's frame.
+    pub local: SmallVec<[(Vec3, Vec3); 4]>,
+    /// Unit normal from `a` towards `b`.
+    pub normal_ab: Vec3,
+}
+
+/// Generalised inverse mass of `body` for a unit impulse along `n` at world offset `r`.
+pub(crate) fn inv_mass_at(body: &Body, rot: &crate::math::Quat, r: &Vec3, n: &Vec3) -> f32 {
+    let rn = r.cross(n);
+    body.inv_mass + rn.dot(&inv_inertia_world(body, rot, &rn))
+}
+
+/// `I⁻¹ v` in world frame for a body with orientation `rot`.
+pub(crate) fn inv_inertia_world(body: &Body, rot: &crate::math::Quat, v: &Vec3) -> Vec3 {
+    let local = rot.inverse_transform_vector(v);
+    rot.transform_vector(&local.component_mul(&body.inv_inertia))
+}
+
+/// Whether two bodies are close enough at step `t` to need a manifold.
+pub(crate) fn near(a: &Body, b: &Body, prediction: f32) -> bool {
+    let reach = a.shape.bounding_radius() + b.shape.bounding_radius() + prediction;
+    (a.position - b.position).norm_squared() <= reach * reach
+}
+
+/// The manifold of `a` (lower id) and `b` at their step-`t` poses, or `None` if no point
+/// lies within `prediction`.
+pub(crate) fn pair_manifold(a: &Body, b: &Body, prediction: f32) -> Option<PairManifold> {
+    debug_assert!(a.id < b.id);
+    let (pa, pb) = (a.pose(), b.pose());
+    let pos12 = pa.inv_mul(&pb);
+    let (sa, sb) = (a.shape.parry(), b.shape.parry());
+    let mut m: ContactManifold<(), ()> = ContactManifold::new();
+    DefaultQueryDispatcher
+        .contact_manifold_convex_convex(
+            &pos12,
+            sa.as_dyn(),
+            sb.as_dyn(),
+            None,
+            None,
+            prediction,
+            &mut m,
+        )
+        .ok()?;
+    if m.points.is_empty() {
+        return None;
+    }
+    let normal_ab = pa.rotation * m.local_n1;
+    let local = m
+        .points
+        .iter()
+        .filter(|p| p.dist <= prediction)
+        .map(|p| (p.local_p1.coords, p.local_p2.coords))
+        .collect::<SmallVec<_>>();
+    (!local.is_empty()).then_some(PairManifold { local, normal_ab })
+}
+
+/// Body `i`'s view of a pair manifold with partner `j`.
+pub(crate) fn view(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
+    let i_is_a = i.id < j.id;
+    let normal = if i_is_a { -m.normal_ab } else { m.normal_ab };
+    let points = m
+        .local
+        .iter()
+        .map(|&(la, lb)| {
+            let (li, lj) = if i_is_a { (la, lb) } else { (lb, la) };
+            let rj = j.rotation * lj;
+            ContactPoint {
+                anchor: li,
+                partner_point: j.position + rj,
+                partner_velocity: j.linvel + j.angvel.cross(&rj),
+                normal,
+                partner_inv_mass: inv_mass_at(j, &j.rotation, &rj, &normal),
+            }
+        })
+        .collect();
+    ContactSet {
+        partner: Some(j.id),
+        friction: 0.5 * (i.friction + j.friction),
+        restitution: 0.5 * (i.restitution + j.restitution),
+        points,
+    }
+}
+
+/// Contacts of body `i` with the static environment within `prediction`, as one set.
+pub(crate) fn environment_contacts(
+    i: &Body,
+    env: &Environment,
+    prediction: f32,
+) -> Option<ContactSet> {
+    let mut points: SmallVec<[ContactPoint; 4]> = SmallVec::new();
+    let statik = |anchor: Vec3, partner_point: Vec3, normal: Vec3| ContactPoint {
+        anchor,
+        partner_point,
+        partner_velocity: Vec3::zeros(),
+        normal,
+        partner_inv_mass: 0.0,
+    };
+    let radius = i.shape.bounding_radius();
+    for plane in &env.planes {
+        let centre_gap = plane.normal.dot(&i.position) - plane.offset;
+        if centre_gap > radius + prediction {
+            continue;
+        }
+        match i.shape {
+            Shape::Ball { radius } => {
+                let gap = centre_gap - radius;
+                if gap <= prediction {
+                    let world = -plane.normal * radius;
+                    let anchor = i.rotation.inverse_transform_vector(&world);
+                    let contact = i.position + world - plane.normal * gap;
+                    points.push(statik(anchor, contact, plane.normal));
+                }
+            }
+            Shape::Cuboid { .. } => {
+                for v in i.shape.vertices() {
+                    let w = i.position + i.rotation * v;
+                    let gap = plane.normal.dot(&w) - plane.offset;
+                    if gap <= prediction {
+                        points.push(statik(v, w - plane.normal * gap, plane.normal));
+                    }
+                }
+            }
+        }
+    }
+    for c in &env.cuboids {
+        let reach = radius + c.half_extents.norm() + prediction;
+        if (c.pose.translation.vector - i.position).norm_squared() > reach * reach {
+            continue;
+        }
+        let pi = i.pose();
+        let pos12 = pi.inv_mul(&c.pose);
+        let si = i.shape.parry();
+        let sc = parry3d::shape::Cuboid::new(c.half_extents);
+        let mut m: ContactManifold<(), ()> = ContactManifold::new();
+        if DefaultQueryDispatcher
+            .contact_manifold_convex_convex(
+                &pos12,
+                si.as_dyn(),
+                &sc,
+                None,
+                None,
+                prediction,
+                &mut m,
+            )
+            .is_err()
+        {
+            continue;
+        }
+        let normal = -(pi.rotation * m.local_n1);
+        for p in m.points.iter().filter(|p| p.dist <= prediction) {
+            points.push(statik(
+                p.local_p1.coords,
+                (c.pose * p.local_p2).coords,
+                normal,
+            ));
+        }
+    }
+    (!points.is_empty()).then(|| ContactSet {
+        partner: None,
+        friction: 0.5 * (env.friction + i.friction),
+        restitution: 0.5 * (env.restitution + i.restitution),
+        points,
+    })
+}

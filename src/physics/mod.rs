@@ -1,0 +1,16 @@
+//! The rigid-body cell model: bodies, static environment, contact generation and the
+//! per-body position-based solver that satisfies the locality contract (SPEC.md §Physics).
+
+mod body;
+mod contact;
+mod environment;
+pub mod metrics;
+mod model;
+mod params;
+mod solver;
+
+pub use body::{Body, Material, Shape};
+pub use contact::{ContactPoint, ContactSet};
+pub use environment::{Environment, Plane, StaticCuboid};
+pub use model::RigidBodyModel;
+pub use params::SolverParams;

@@ -1,0 +1,34 @@
+//! Solver parameters and the limits that make the locality contract hold.
+
+use serde::{Deserialize, Serialize};
+
+/// Parameters of the rigid-body step. Defaults are the values SPEC.md documents.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverParams {
+    /// Substeps per step (each of `dt / substeps` seconds).
+    pub substeps: u32,
+    /// Gauss–Seidel sweeps over one partner's contact points per substep.
+    pub sweeps: u32,
+    /// Relaxation factor applied to the averaged position correction.
+    pub relaxation: f32,
+    /// Contact margin in metres: extra distance at which contact points are generated.
+    pub margin: f32,
+    /// Speed cap in m/s; sets the displacement allowance per step (`max_speed * dt`).
+    pub max_speed: f32,
+    /// Angular speed cap in rad/s.
+    pub max_angular_speed: f32,
+}
+
+impl Default for SolverParams {
+    fn default() -> Self {
+        SolverParams {
+            substeps: 10,
+            sweeps: 2,
+            relaxation: 1.0,
+            margin: 0.02,
+            max_speed: 30.0,
+            max_angular_speed: 60.0,
+        }
+    }
+}

@@ -1,0 +1,266 @@
+//! Scene validation: every rule names the field, the value and what is allowed.
+
+use super::{Scene, SceneError};
+use crate::grid::Grid;
+use crate::physics::metrics::{environment_penetration, pair_penetration};
+use crate::physics::{RigidBodyModel, Shape};
+use crate::state::CellStates;
+
+/// Initial overlap tolerated between bodies (and with static geometry), in metres.
+pub const OVERLAP_TOLERANCE: f32 = 1e-3;
+
+struct Checker<'a> {
+    origin: &'a str,
+}
+
+impl Checker<'_> {
+    fn fail(
+        &self,
+        field: impl Into<String>,
+        value: impl std::fmt::Debug,
+        allowed: &str,
+    ) -> SceneError {
+        SceneError::Invalid {
+            origin: self.origin.to_string(),
+            field: field.into(),
+            value: format!("{value:?}"),
+            allowed: allowed.to_string(),
+        }
+    }
+
+    fn finite(&self, field: &str, v: &[f32]) -> Result<(), SceneError> {
+        if v.iter().all(|x| x.is_finite()) {
+            Ok(())
+        } else {
+            Err(self.fail(
+                field,
+                v,
+                "every component must be a finite number (no NaN or infinity)",
+            ))
+        }
+    }
+
+    fn range(
+        &self,
+        field: &str,
+        v: f32,
+        lo: f32,
+        hi: f32,
+        allowed: &str,
+    ) -> Result<(), SceneError> {
+        if v.is_finite() && v >= lo && v <= hi {
+            Ok(())
+        } else {
+            Err(self.fail(field, v, allowed))
+        }
+    }
+
+    fn positive(&self, field: &str, v: f32) -> Result<(), SceneError> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(self.fail(field, v, "must be a finite number greater than 0"))
+        }
+    }
+}
+
+/// Checks every rule of SPEC.md §Scenes. `origin` names the file in messages.
+pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
+    let c = Checker { origin };
+    c.range(
+        "dt",
+        scene.dt,
+        1e-5,
+        0.1,
+        "must be between 0.00001 and 0.1 seconds",
+    )?;
+    c.finite("gravity", &scene.gravity)?;
+    c.finite("domain.min", &scene.domain.min)?;
+    c.finite("domain.max", &scene.domain.max)?;
+    for k in 0..3 {
+        if scene.domain.max[k] <= scene.domain.min[k] {
+            return Err(c.fail(
+                format!("domain.max[{k}]"),
+                scene.domain.max[k],
+                &format!(
+                    "must be greater than domain.min[{k}] = {}",
+                    scene.domain.min[k]
+                ),
+            ));
+        }
+    }
+    let s = &scene.solver;
+    if !(1..=1000).contains(&s.substeps) {
+        return Err(c.fail("solver.substeps", s.substeps, "must be between 1 and 1000"));
+    }
+    if !(1..=100).contains(&s.sweeps) {
+        return Err(c.fail("solver.sweeps", s.sweeps, "must be between 1 and 100"));
+    }
+    c.range(
+        "solver.relaxation",
+        s.relaxation,
+        0.01,
+        2.0,
+        "must be between 0.01 and 2",
+    )?;
+    c.range(
+        "solver.margin",
+        s.margin,
+        0.0,
+        10.0,
+        "must be between 0 and 10 metres",
+    )?;
+    c.positive("solver.max_speed", s.max_speed)?;
+    c.positive("solver.max_angular_speed", s.max_angular_speed)?;
+    if let Some(e) = scene.cell_edge {
+        c.positive("cell_edge", e)?;
+    }
+    let env = &scene.environment;
+    if let Some(g) = env.ground {
+        c.range(
+            "environment.ground",
+            g,
+            scene.domain.min[1],
+            scene.domain.max[1],
+            "must lie between domain.min[1] and domain.max[1]",
+        )?;
+    }
+    c.range(
+        "environment.friction",
+        env.friction,
+        0.0,
+        10.0,
+        "must be between 0 and 10",
+    )?;
+    c.range(
+        "environment.restitution",
+        env.restitution,
+        0.0,
+        1.0,
+        "must be between 0 and 1",
+    )?;
+    for (i, sc) in env.cuboids.iter().enumerate() {
+        c.finite(&format!("environment.cuboids[{i}].position"), &sc.position)?;
+        c.finite(&format!("environment.cuboids[{i}].rotation"), &sc.rotation)?;
+        for (k, &h) in sc.half_extents.iter().enumerate() {
+            c.positive(&format!("environment.cuboids[{i}].half_extents[{k}]"), h)?;
+        }
+    }
+
+    let extent = [0, 1, 2].map(|k| scene.domain.max[k] - scene.domain.min[k]);
+    let smallest = extent.iter().cloned().fold(f32::INFINITY, f32::min);
+    let mut ids: Vec<(u64, usize)> = Vec::with_capacity(scene.bodies.len());
+    for (i, b) in scene.bodies.iter().enumerate() {
+        let f = |name: &str| format!("bodies[{i}].{name}");
+        match b.shape {
+            Shape::Ball { radius } => c.positive(&f("shape.radius"), radius)?,
+            Shape::Cuboid { half_extents } => {
+                for (k, &h) in half_extents.iter().enumerate() {
+                    c.positive(&f(&format!("shape.half_extents[{k}]")), h)?;
+                }
+            }
+        }
+        let diameter = 2.0 * b.shape.bounding_radius();
+        if diameter >= smallest {
+            return Err(c.fail(
+                f("shape"),
+                b.shape,
+                &format!("the body (bounding diameter {diameter} m) must be smaller than the domain's smallest extent ({smallest} m)"),
+            ));
+        }
+        c.positive(&f("material.density"), b.material.density)?;
+        c.range(
+            &f("material.friction"),
+            b.material.friction,
+            0.0,
+            10.0,
+            "must be between 0 and 10",
+        )?;
+        c.range(
+            &f("material.restitution"),
+            b.material.restitution,
+            0.0,
+            1.0,
+            "must be between 0 and 1",
+        )?;
+        c.finite(&f("position"), &b.position)?;
+        c.finite(&f("rotation"), &b.rotation)?;
+        c.finite(&f("velocity"), &b.velocity)?;
+        c.finite(&f("angular_velocity"), &b.angular_velocity)?;
+        for k in 0..3 {
+            if b.position[k] < scene.domain.min[k] || b.position[k] >= scene.domain.max[k] {
+                return Err(c.fail(
+                    f("position"),
+                    b.position,
+                    "must lie inside the domain (domain.min <= position < domain.max)",
+                ));
+            }
+        }
+        let speed = nalgebra::Vector3::from(b.velocity).norm();
+        if speed > s.max_speed {
+            return Err(c.fail(
+                f("velocity"),
+                b.velocity,
+                &format!(
+                    "speed must not exceed solver.max_speed = {} m/s",
+                    s.max_speed
+                ),
+            ));
+        }
+        ids.push((b.id, i));
+    }
+    ids.sort();
+    for w in ids.windows(2) {
+        if w[0].0 == w[1].0 {
+            return Err(c.fail(
+                format!("bodies[{}].id", w[1].1),
+                w[1].0,
+                &format!("ids must be unique; bodies[{}] has the same id", w[0].1),
+            ));
+        }
+    }
+    let grid = scene.grid();
+    if grid.cell_count() > Grid::MAX_CELLS {
+        return Err(c.fail(
+            "domain",
+            scene.domain,
+            &format!("the grid would have {} cells of edge {} m; at most {} are allowed: shrink the domain or raise cell_edge", grid.cell_count(), grid.edge, Grid::MAX_CELLS),
+        ));
+    }
+    check_overlaps(scene, &grid, &c)
+}
+
+fn check_overlaps(scene: &Scene, grid: &Grid, c: &Checker) -> Result<(), SceneError> {
+    let model = scene.model();
+    let bodies = scene.initial_bodies();
+    let index_of = |id: u64| scene.bodies.iter().position(|b| b.id == id).unwrap_or(0);
+    for b in &bodies {
+        let p = environment_penetration(b, &model.environment);
+        if p > OVERLAP_TOLERANCE {
+            return Err(c.fail(
+                format!("bodies[{}].position", index_of(b.id)),
+                scene.bodies[index_of(b.id)].position,
+                &format!("the body overlaps the static environment by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move it clear"),
+            ));
+        }
+    }
+    let mut events = Vec::new();
+    let state = CellStates::binned::<RigidBodyModel>(grid, bodies, 0, &mut events);
+    for i in state.occupied() {
+        let cell = grid.coord(i);
+        let nb = state.neighbourhood(grid, cell);
+        for a in nb.own() {
+            for b in nb.iter().filter(|b| b.id > a.id) {
+                let p = pair_penetration(a, b);
+                if p > OVERLAP_TOLERANCE {
+                    return Err(c.fail(
+                        format!("bodies[{}].position", index_of(b.id)),
+                        scene.bodies[index_of(b.id)].position,
+                        &format!("body {} overlaps body {} by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move them apart", b.id, a.id),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
