@@ -13,12 +13,14 @@ pub enum SceneError {
         /// The operating system's reason.
         reason: String,
     },
-    /// The text is not valid TOML/JSON for a scene (syntax, missing or unknown field, wrong type).
+    /// The text is not valid TOML/JSON for a scene: syntax, a missing or unknown field, a
+    /// wrong type, an unknown shape `type`.
     #[error("{origin}: {message}")]
     Parse {
         /// The file or `<input>`.
         origin: String,
-        /// The parser's message, which names the line and field.
+        /// The parser's message: the line and column, what is wrong (naming the field) and,
+        /// for TOML, the offending line.
         message: String,
     },
     /// A field has a value outside what is allowed.
@@ -34,6 +36,15 @@ pub enum SceneError {
         allowed: String,
     },
     /// No built-in scene has that name.
-    #[error("unknown built-in scene `{0}`; `soda scenes` lists them")]
+    #[error("unknown built-in scene `{0}`: the built-ins are {names} (`soda scenes` describes them)", names = builtin_names())]
     UnknownBuiltin(String),
+}
+
+/// The built-in scene names, quoted and comma-separated.
+fn builtin_names() -> String {
+    super::builtin::BUILTINS
+        .iter()
+        .map(|b| format!("`{}`", b.name))
+        .collect::<Vec<_>>()
+        .join(", ")
 }

@@ -1,4 +1,4 @@
-//! Reading scene files (TOML or JSON) into validated scenes.
+//! Reading scene files (TOML or JSON) into validated scenes, and writing scenes back out.
 
 use super::validate::validate;
 use super::{Scene, SceneError};
@@ -13,37 +13,122 @@ pub enum SceneFormat {
     Json,
 }
 
+impl SceneFormat {
+    /// The format a path's extension names (`.toml` or `.json`, any case), if any.
+    pub fn from_path(path: &Path) -> Option<SceneFormat> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "toml" => Some(SceneFormat::Toml),
+            "json" => Some(SceneFormat::Json),
+            _ => None,
+        }
+    }
+
+    /// Writes `scene` as text in this format; [`parse_scene`] reads it back to an equal
+    /// scene (every `f32` keeps its bits).
+    ///
+    /// TOML has no null, so a scene without a ground plane (`environment.ground` absent)
+    /// cannot be written as TOML — reading the file back would give the default ground at
+    /// y = 0. That case is an error naming the field; write JSON (`"ground": null`) instead.
+    pub fn render(self, scene: &Scene) -> Result<String, SceneError> {
+        let failed = |message: String| SceneError::Invalid {
+            origin: format!("scene `{}`", scene.name),
+            field: "<scene>".into(),
+            value: "<in memory>".into(),
+            allowed: format!("it could not be written as {self:?}: {message}"),
+        };
+        match self {
+            SceneFormat::Toml => {
+                if scene.environment.ground.is_none() {
+                    return Err(SceneError::Invalid {
+                        origin: format!("scene `{}`", scene.name),
+                        field: "environment.ground".into(),
+                        value: "None (no ground plane)".into(),
+                        allowed: "TOML has no null, so a scene without a ground cannot be written as TOML (an absent `ground` reads back as the default ground at y = 0); write it as JSON, where `\"ground\": null` means no ground".into(),
+                    });
+                }
+                toml::to_string(scene).map_err(|e| failed(e.to_string()))
+            }
+            SceneFormat::Json => {
+                serde_json::to_string_pretty(scene).map_err(|e| failed(e.to_string()))
+            }
+        }
+    }
+}
+
 /// Parses and validates a scene text. `origin` names it in error messages.
+///
+/// Syntax errors, missing or unknown fields, wrong types and unknown shape types are
+/// [`SceneError::Parse`] (the message names the line and column, and the field); values
+/// outside what is allowed are [`SceneError::Invalid`] (naming the field path, such as
+/// `bodies[3].shape.radius`, the value and what is allowed).
 pub fn parse_scene(text: &str, format: SceneFormat, origin: &str) -> Result<Scene, SceneError> {
     let scene: Scene = match format {
         SceneFormat::Toml => toml::from_str(text).map_err(|e| SceneError::Parse {
             origin: origin.to_string(),
-            message: e.to_string().trim_end().to_string(),
+            message: toml_message(&e, text),
         })?,
         SceneFormat::Json => serde_json::from_str(text).map_err(|e| SceneError::Parse {
             origin: origin.to_string(),
-            message: e.to_string(),
+            message: json_message(&e),
         })?,
     };
     validate(&scene, origin)?;
     Ok(scene)
 }
 
+/// The TOML parser's message, with the line and column when it has a location.
+fn toml_message(e: &toml::de::Error, text: &str) -> String {
+    let message = e.message().trim_end();
+    let Some(span) = e.span() else {
+        return message.to_string();
+    };
+    let start = span.start.min(text.len());
+    let before = &text.as_bytes()[..start];
+    let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+    let column = start
+        - before
+            .iter()
+            .rposition(|&b| b == b'\n')
+            .map_or(0, |p| p + 1)
+        + 1;
+    if start == 0 && span.end >= text.len() {
+        // The whole document: a missing top-level field.
+        return format!("at the top level: {message}");
+    }
+    let source = text.lines().nth(line - 1).unwrap_or("").trim_end();
+    if source.is_empty() {
+        return format!("line {line}, column {column}: {message}");
+    }
+    format!("line {line}, column {column}: {message}\n  |\n{line:>3} | {source}")
+}
+
+/// The JSON parser's message, which already ends with the line and column.
+fn json_message(e: &serde_json::Error) -> String {
+    let kind = match e.classify() {
+        serde_json::error::Category::Syntax => "syntax error: ",
+        serde_json::error::Category::Eof => "unexpected end of file: ",
+        _ => "",
+    };
+    format!("{kind}{e}")
+}
+
 /// Reads, parses and validates a scene file; the extension (`.toml` or `.json`) picks the
 /// syntax.
 pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
     let origin = path.display().to_string();
-    let format = match path.extension().and_then(|e| e.to_str()) {
-        Some("toml") => SceneFormat::Toml,
-        Some("json") => SceneFormat::Json,
-        other => {
-            return Err(SceneError::Invalid {
-                origin,
-                field: "<file name>".into(),
-                value: format!("{:?}", other.unwrap_or("")),
-                allowed: "the extension must be .toml or .json".into(),
-            })
-        }
+    let Some(format) = SceneFormat::from_path(path) else {
+        return Err(SceneError::Invalid {
+            origin,
+            field: "<file name>".into(),
+            value: format!(
+                "{:?}",
+                path.extension()
+                    .map(|e| e.to_string_lossy())
+                    .unwrap_or_default()
+            ),
+            allowed: "a scene file's extension must be .toml or .json".into(),
+        });
     };
     let text = std::fs::read_to_string(path).map_err(|e| SceneError::Io {
         path: origin.clone(),

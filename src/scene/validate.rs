@@ -122,7 +122,10 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
             g,
             scene.domain.min[1],
             scene.domain.max[1],
-            "must lie between domain.min[1] and domain.max[1]",
+            &format!(
+                "must lie between domain.min[1] = {} and domain.max[1] = {}",
+                scene.domain.min[1], scene.domain.max[1]
+            ),
         )?;
     }
     c.range(
@@ -192,7 +195,10 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
                 return Err(c.fail(
                     f("position"),
                     b.position,
-                    "must lie inside the domain (domain.min <= position < domain.max)",
+                    &format!(
+                        "the centre must lie inside the domain: domain.min = {:?} <= position < domain.max = {:?} on every axis",
+                        scene.domain.min, scene.domain.max
+                    ),
                 ));
             }
         }
@@ -219,14 +225,27 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
             ));
         }
     }
-    let grid = scene.grid();
-    if grid.cell_count() > Grid::MAX_CELLS {
+    let edge = scene.cell_edge();
+    if !edge.is_finite() {
+        return Err(c.fail(
+            "solver.max_speed",
+            s.max_speed,
+            &format!("the cell edge derived from it (largest body + solver.margin + 2 * max_speed * dt) must be finite, got {edge}: lower solver.max_speed"),
+        ));
+    }
+    // Counted in f64 so that a huge domain cannot overflow the count (Grid::cell_count is
+    // a usize product).
+    let cells: f64 = (0..3)
+        .map(|k| ((extent[k] as f64 / edge as f64).ceil()).max(1.0))
+        .product();
+    if cells > Grid::MAX_CELLS as f64 {
         return Err(c.fail(
             "domain",
             scene.domain,
-            &format!("the grid would have {} cells of edge {} m; at most {} are allowed: shrink the domain or raise cell_edge", grid.cell_count(), grid.edge, Grid::MAX_CELLS),
+            &format!("the grid would have {cells:.3e} cells of edge {edge} m; at most {} are allowed: shrink the domain or raise cell_edge", Grid::MAX_CELLS),
         ));
     }
+    let grid = scene.grid();
     check_overlaps(scene, &grid, &c)
 }
 
