@@ -1,0 +1,406 @@
+//! The `soda` binary: help, summaries and JSON with the final hash, determinism across runs,
+//! recording, scene dumps, and clear non-zero exits on bad input. Runs are kept tiny.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn soda(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_soda"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("the soda binary runs")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8(o.stdout.clone()).expect("stdout is UTF-8")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8(o.stderr.clone()).expect("stderr is UTF-8")
+}
+
+/// Runs `soda args` and expects success; returns stdout.
+fn ok(args: &[&str]) -> String {
+    let o = soda(args);
+    assert!(
+        o.status.success(),
+        "soda {args:?} failed ({}):\n{}",
+        o.status,
+        stderr(&o)
+    );
+    stdout(&o)
+}
+
+/// Runs `soda args` and expects exit status 1 with an error message; returns stderr.
+fn fails(args: &[&str]) -> String {
+    let o = soda(args);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "soda {args:?}: {err}");
+    assert!(err.starts_with("error: "), "soda {args:?}: {err}");
+    assert!(!err.contains("panicked"), "soda {args:?} panicked: {err}");
+    err
+}
+
+fn is_hash(s: &str) -> bool {
+    s.len() == 16
+        && s.bytes()
+            .all(|b| b.is_ascii_hexdigit() && !b.is_ascii_uppercase())
+}
+
+/// The hash on the summary's `hash` line.
+fn summary_hash(out: &str) -> String {
+    let line = out
+        .lines()
+        .find(|l| l.split_whitespace().next() == Some("hash"))
+        .unwrap_or_else(|| panic!("no `hash` line in:\n{out}"));
+    let words: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(words.len(), 2, "{line}");
+    words[1].to_string()
+}
+
+fn json(args: &[&str]) -> serde_json::Value {
+    let out = ok(args);
+    serde_json::from_str(&out).unwrap_or_else(|e| panic!("stdout is not JSON ({e}):\n{out}"))
+}
+
+const SMALL: &[&str] = &["run", "--steps", "5", "--objects", "8"];
+
+fn with<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+    SMALL.iter().chain(extra).copied().collect()
+}
+
+fn temp_file(dir: &tempfile::TempDir, name: &str, text: &str) -> PathBuf {
+    let p = dir.path().join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn no_arguments_prints_help_naming_the_commands() {
+    let o = soda(&[]);
+    let text = stdout(&o) + &stderr(&o);
+    assert!(!o.status.success(), "no command is a usage error");
+    for word in ["Usage", "run", "scenes"] {
+        assert!(text.contains(word), "help lacks `{word}`:\n{text}");
+    }
+    let help = ok(&["--help"]);
+    assert!(help.contains("run") && help.contains("scenes"), "{help}");
+}
+
+#[test]
+fn run_help_documents_every_option() {
+    let help = ok(&["run", "--help"]);
+    for opt in [
+        "--scene",
+        "--steps",
+        "--objects",
+        "--seed",
+        "--record",
+        "--record-every",
+        "--json",
+    ] {
+        assert!(help.contains(opt), "run --help lacks {opt}:\n{help}");
+    }
+}
+
+#[test]
+fn summary_has_a_hash_line_with_16_lowercase_hex_digits() {
+    let out = ok(SMALL);
+    let hash = summary_hash(&out);
+    assert!(is_hash(&hash), "{hash}");
+    for word in [
+        "scene",
+        "falling-cubes",
+        "bodies",
+        "steps",
+        "cell edge",
+        "wall time",
+        "steps/s",
+        "body-steps/s",
+        "kinetic energy",
+        "max penetration",
+        "max speed",
+        "speed capped",
+        "left domain",
+    ] {
+        assert!(out.contains(word), "summary lacks `{word}`:\n{out}");
+    }
+}
+
+#[test]
+fn run_json_is_only_json_with_a_16_hex_digit_hash_field() {
+    let v = json(&with(&["--json"]));
+    let hash = v["hash"].as_str().expect("a string `hash` field");
+    assert!(is_hash(hash), "{hash}");
+    assert_eq!(v["steps"], 5);
+    assert_eq!(v["last"]["bodies"], 8);
+}
+
+#[test]
+fn two_runs_give_the_same_hash_in_summary_and_json() {
+    let a = summary_hash(&ok(SMALL));
+    let b = summary_hash(&ok(SMALL));
+    assert_eq!(a, b);
+    let j = json(&with(&["--json"]));
+    assert_eq!(j["hash"].as_str(), Some(a.as_str()));
+}
+
+#[test]
+fn a_different_seed_gives_a_different_hash() {
+    let a = summary_hash(&ok(&with(&["--seed", "1"])));
+    let b = summary_hash(&ok(&with(&["--seed", "2"])));
+    assert_ne!(a, b);
+}
+
+#[test]
+fn every_builtin_runs_a_few_steps() {
+    for name in [
+        "falling-cubes",
+        "sparse-gas",
+        "dense-pile",
+        "skewed",
+        "chain",
+    ] {
+        let hash = summary_hash(&ok(&[
+            "run",
+            "--scene",
+            name,
+            "--steps",
+            "3",
+            "--objects",
+            "8",
+        ]));
+        assert!(is_hash(&hash), "{name}: {hash}");
+    }
+}
+
+#[test]
+fn scenes_lists_every_builtin_with_its_default_size() {
+    let out = ok(&["scenes"]);
+    for (name, n) in [
+        ("falling-cubes", "1000"),
+        ("sparse-gas", ""),
+        ("dense-pile", ""),
+        ("skewed", ""),
+        ("chain", ""),
+    ] {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(name))
+            .unwrap_or_else(|| panic!("`{name}` not listed:\n{out}"));
+        assert!(line.contains(n), "{line}");
+    }
+}
+
+#[test]
+fn a_dumped_builtin_runs_from_its_file_to_the_builtins_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = ok(&[
+        "scenes",
+        "--dump",
+        "falling-cubes",
+        "--objects",
+        "8",
+        "--seed",
+        "3",
+    ]);
+    let file = temp_file(&dir, "fc.toml", &text);
+    let from_file = json(&[
+        "run",
+        "--scene",
+        file.to_str().unwrap(),
+        "--steps",
+        "5",
+        "--json",
+    ]);
+    let builtin = json(&with(&["--seed", "3", "--json"]));
+    assert_eq!(from_file["hash"], builtin["hash"]);
+}
+
+#[test]
+fn every_example_scene_file_runs() {
+    let mut n = 0;
+    for entry in std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")).unwrap() {
+        let p = entry.unwrap().path();
+        if p.extension().is_some_and(|e| e == "toml" || e == "json") {
+            let hash = summary_hash(&ok(&[
+                "run",
+                "--scene",
+                p.to_str().unwrap(),
+                "--steps",
+                "5",
+            ]));
+            assert!(is_hash(&hash));
+            n += 1;
+        }
+    }
+    assert!(n >= 2);
+}
+
+const BAD_BASE: &str = "[domain]\nmin = [0.0, 0.0, 0.0]\nmax = [4.0, 4.0, 4.0]\n\n[[bodies]]\nid = 0\nshape = { type = \"ball\", radius = 0.5 }\nposition = [2.0, 1.0, 2.0]\n";
+
+#[test]
+fn the_bad_file_fixture_base_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = temp_file(&dir, "good.toml", BAD_BASE);
+    ok(&["run", "--scene", file.to_str().unwrap(), "--steps", "2"]);
+}
+
+#[test]
+fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "nan.toml",
+            "[2.0, 1.0, 2.0]",
+            "[nan, 1.0, 2.0]",
+            "bodies[0].position",
+        ),
+        (
+            "negative.toml",
+            "radius = 0.5",
+            "radius = -1.0",
+            "bodies[0].shape.radius",
+        ),
+        ("shape.toml", "\"ball\"", "\"capsule\"", "capsule"),
+        (
+            "missing.toml",
+            "position = [2.0, 1.0, 2.0]\n",
+            "",
+            "missing field `position`",
+        ),
+        (
+            "unknown.toml",
+            "id = 0",
+            "id = 0\nmass = 1.0",
+            "unknown field `mass`",
+        ),
+        ("syntax.toml", "id = 0", "id = = 0", "line 6"),
+        (
+            "outside.toml",
+            "[2.0, 1.0, 2.0]",
+            "[2.0, 1.0, 9.0]",
+            "inside the domain",
+        ),
+        (
+            "huge.toml",
+            "radius = 0.5",
+            "radius = 3.0",
+            "smaller than the domain",
+        ),
+    ];
+    for (name, from, to, mention) in cases {
+        assert!(BAD_BASE.contains(from), "{name}");
+        let file = temp_file(&dir, name, &BAD_BASE.replace(from, to));
+        let path = file.to_str().unwrap();
+        let err = fails(&["run", "--scene", path, "--steps", "2"]);
+        assert!(
+            err.contains(path),
+            "{name}: message does not name the file: {err}"
+        );
+        assert!(
+            err.contains(mention),
+            "{name}: message lacks `{mention}`: {err}"
+        );
+    }
+}
+
+#[test]
+fn overlapping_and_duplicate_bodies_exit_non_zero_naming_the_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let second = "\n[[bodies]]\nid = 1\nshape = { type = \"ball\", radius = 0.5 }\nposition = [2.5, 1.0, 2.0]\n";
+    let file = temp_file(&dir, "overlap.toml", &(BAD_BASE.to_string() + second));
+    let err = fails(&["run", "--scene", file.to_str().unwrap()]);
+    assert!(
+        err.contains("bodies[1].position") && err.contains("overlaps"),
+        "{err}"
+    );
+    let dup = second.replace("id = 1", "id = 0").replace("2.5", "3.5");
+    let file = temp_file(&dir, "dup.toml", &(BAD_BASE.to_string() + &dup));
+    let err = fails(&["run", "--scene", file.to_str().unwrap()]);
+    assert!(
+        err.contains("bodies[1].id") && err.contains("unique"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_missing_scene_file_exits_non_zero_naming_it() {
+    let err = fails(&["run", "--scene", "no/such/file.toml"]);
+    assert!(err.contains("no/such/file.toml"), "{err}");
+}
+
+#[test]
+fn objects_with_a_scene_file_is_an_error_naming_the_option() {
+    let err = fails(&["run", "--scene", "scenes/two-cubes.toml", "--objects", "5"]);
+    assert!(err.contains("--objects"), "{err}");
+}
+
+#[test]
+fn an_unknown_builtin_exits_non_zero_listing_the_builtins() {
+    let err = fails(&["run", "--scene", "falling-cube"]);
+    assert!(
+        err.contains("falling-cube`") && err.contains("`falling-cubes`"),
+        "{err}"
+    );
+    let err = fails(&["scenes", "--dump", "nope"]);
+    assert!(err.contains("nope"), "{err}");
+}
+
+#[test]
+fn zero_objects_exits_non_zero_naming_the_field() {
+    let err = fails(&["run", "--objects", "0", "--steps", "1"]);
+    assert!(err.contains("objects") && err.contains('0'), "{err}");
+}
+
+#[test]
+fn record_writes_the_documented_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("frames.csv");
+    let path = file.to_str().unwrap();
+    let summary = ok(&with(&["--record", path, "--record-every", "2"]));
+    assert!(summary.contains("recorded"), "{summary}");
+    let text = std::fs::read_to_string(&file).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("step,id,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    // The initial state, every 2nd step, and the last step (5); 8 bodies each.
+    assert_eq!(rows.len(), 4 * 8);
+    let mut keys = Vec::new();
+    for r in &rows {
+        assert_eq!(r.len(), 15, "{r:?}");
+        let step: u64 = r[0].parse().unwrap();
+        let id: u64 = r[1].parse().unwrap();
+        for v in &r[2..] {
+            let x: f32 = v.parse().unwrap_or_else(|_| panic!("not a number: {v}"));
+            assert!(x.is_finite(), "{r:?}");
+        }
+        let q: Vec<f32> = r[5..9].iter().map(|v| v.parse().unwrap()).collect();
+        let norm = q.iter().map(|c| c * c).sum::<f32>().sqrt();
+        assert!((norm - 1.0).abs() < 1e-4, "quaternion not unit: {r:?}");
+        keys.push((step, id));
+    }
+    let steps: Vec<u64> = keys
+        .iter()
+        .map(|k| k.0)
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    assert_eq!(steps, vec![0, 2, 4, 5]);
+    let mut sorted = keys.clone();
+    sorted.sort();
+    assert_eq!(keys, sorted, "rows must be in (step, id) order");
+}
+
+#[test]
+fn record_every_needs_record_and_must_be_positive() {
+    let o = soda(&with(&["--record-every", "2"]));
+    assert!(!o.status.success());
+    let o = soda(&with(&["--record", "x.csv", "--record-every", "0"]));
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--record-every"));
+}
