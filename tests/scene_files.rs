@@ -325,3 +325,18 @@ fn every_example_scene_file_parses() {
         assert!(!scene.bodies.is_empty(), "{}", p.display());
     }
 }
+
+#[test]
+fn the_readme_scene_example_parses() {
+    let readme =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let start = readme
+        .find("```toml\n")
+        .expect("a TOML example in README.md")
+        + 8;
+    let len = readme[start..].find("```").unwrap();
+    let scene = parse_scene(&readme[start..start + len], SceneFormat::Toml, "README.md")
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(scene.bodies.len(), 2);
+    assert_eq!(scene.environment.cuboids.len(), 1);
+}
