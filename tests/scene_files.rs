@@ -340,3 +340,71 @@ fn the_readme_scene_example_parses() {
     assert_eq!(scene.bodies.len(), 2);
     assert_eq!(scene.environment.cuboids.len(), 1);
 }
+
+mod never_panics {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Extreme and invalid values to put in place of the base scene's numbers.
+    const EXTREMES: &[&str] = &[
+        "nan", "inf", "-inf", "0.0", "-0.0", "-1.0", "1e-38", "3e38", "-3e38", "1e6", "0.5", "2.0",
+    ];
+
+    /// The byte ranges of the numbers in `BASE` (not the ids).
+    fn number_spans() -> Vec<(usize, usize)> {
+        let b = BASE.as_bytes();
+        let mut spans = Vec::new();
+        let mut i = 0;
+        while i < b.len() {
+            let starts =
+                (b[i] == b'-' || b[i].is_ascii_digit()) && i > 0 && matches!(b[i - 1], b' ' | b'[');
+            if starts {
+                let j = (i + 1..b.len())
+                    .find(|&j| !(b[j].is_ascii_digit() || b[j] == b'.'))
+                    .unwrap_or(b.len());
+                if BASE[i..j].contains('.') {
+                    spans.push((i, j));
+                }
+                i = j;
+            } else {
+                i += 1;
+            }
+        }
+        spans
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+
+        /// Any mix of extreme values either parses to a scene that runs a step, or is
+        /// rejected with an error naming a field — never a panic.
+        #[test]
+        fn extreme_values_are_rejected_or_run_without_panicking(
+            picks in proptest::collection::vec((any::<proptest::sample::Index>(), 0..EXTREMES.len()), 1..4)
+        ) {
+            let spans = number_spans();
+            prop_assert!(spans.len() > 10);
+            let mut chosen: Vec<(usize, usize, &str)> = picks
+                .iter()
+                .map(|(i, e)| {
+                    let (a, b) = spans[i.index(spans.len())];
+                    (a, b, EXTREMES[*e])
+                })
+                .collect();
+            chosen.sort();
+            chosen.dedup_by_key(|c| c.0);
+            let mut text = BASE.to_string();
+            for (a, b, v) in chosen.iter().rev() {
+                text.replace_range(a..b, v);
+            }
+            match parse(&text) {
+                Ok(scene) => {
+                    let mut sim = soda::Simulation::new(scene);
+                    sim.run(1, |_, _| {});
+                }
+                Err(SceneError::Invalid { field, .. }) => prop_assert!(!field.is_empty()),
+                Err(e) => prop_assert!(false, "unexpected error kind: {e}"),
+            }
+        }
+    }
+}

@@ -63,7 +63,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let initial_bodies = scene.bodies.len();
     let mut sim = Simulation::new(scene);
     let first = sim.reference().step_number();
-    let last = first + args.steps;
+    let last = first.saturating_add(args.steps);
     let mut recorder = match &args.output.record {
         Some(path) => Some(Recorder::create(path, args.output.record_every, last)?),
         None => None,
@@ -104,7 +104,7 @@ fn progress_bar(args: &RunArgs, bodies: usize) -> ProgressBar {
     }
     let bar = ProgressBar::with_draw_target(Some(args.steps), ProgressDrawTarget::stderr());
     if let Ok(style) =
-        ProgressStyle::with_template("{bar:40} step {pos}/{len}  {per_sec:.0}  eta {eta}")
+        ProgressStyle::with_template("{bar:40} step {pos}/{len}  {elapsed} elapsed, eta {eta}")
     {
         bar.set_style(style);
     }
