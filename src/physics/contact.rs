@@ -57,9 +57,30 @@ pub(crate) fn inv_inertia_world(body: &Body, rot: &crate::math::Quat, v: &Vec3) 
     rot.transform_vector(&local.component_mul(&body.inv_inertia))
 }
 
-/// Whether two bodies are close enough at step `t` to need a manifold.
-pub(crate) fn near(a: &Body, b: &Body, prediction: f32) -> bool {
-    let reach = a.shape.bounding_radius() + b.shape.bounding_radius() + prediction;
+/// How far apart (surface to surface) a body may be from a partner at step `t` and still
+/// reach it during the step: the margin plus the largest closing motion the step-`t`
+/// velocities allow (relative linear speed, the spin of each surface, one step of gravity and
+/// the separation-speed allowance), never more than `cap`.
+pub(crate) fn speculative_distance(
+    a: &Body,
+    b: Option<&Body>,
+    dt: f32,
+    g: f32,
+    margin: f32,
+    cap: f32,
+) -> f32 {
+    let (vb, spin_b) = match b {
+        Some(b) => (b.linvel, b.angvel.norm() * b.shape.bounding_radius()),
+        None => (Vec3::zeros(), 0.0),
+    };
+    let closing =
+        (a.linvel - vb).norm() + a.angvel.norm() * a.shape.bounding_radius() + spin_b + g * dt;
+    (margin + closing * dt).min(cap)
+}
+
+/// Whether two bodies' bounding spheres are within `distance` of each other.
+pub(crate) fn near(a: &Body, b: &Body, distance: f32) -> bool {
+    let reach = a.shape.bounding_radius() + b.shape.bounding_radius() + distance;
     (a.position - b.position).norm_squared() <= reach * reach
 }
 
@@ -108,7 +129,7 @@ pub(crate) fn view(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
             ContactPoint {
                 anchor: li,
                 partner_point: j.position + rj,
-                partner_velocity: j.linvel + j.angvel.cross(&rj),
+                partner_velocity: j.linvel,
                 normal,
                 partner_inv_mass: inv_mass_at(j, &j.rotation, &rj, &normal),
             }

@@ -1,7 +1,9 @@
 //! [`RigidBodyModel`]: the rigid-body implementation of [`CellModel`].
 
 use super::body::Body;
-use super::contact::{environment_contacts, near, pair_manifold, view, ContactSet, PairManifold};
+use super::contact::{
+    environment_contacts, near, pair_manifold, speculative_distance, view, ContactSet, PairManifold,
+};
 use super::environment::Environment;
 use super::params::SolverParams;
 use super::solver::solve_body;
@@ -10,6 +12,10 @@ use crate::grid::Grid;
 use crate::hash::StateHash;
 use crate::math::Vec3;
 use crate::model::{BodyId, CellModel, Neighbourhood, Step};
+
+/// Cosine of the largest angle between a contact normal and the vertical for which the
+/// contact counts as support (shock propagation, SPEC.md §Physics): 45°.
+pub const SUPPORT_COSINE: f32 = std::f32::consts::FRAC_1_SQRT_2;
 
 /// The rigid-body cell model: static data shared by every cell computation.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,26 +56,49 @@ impl RigidBodyModel {
         partners: &[&Body],
         cache: &mut Vec<(BodyId, BodyId, Option<PairManifold>)>,
     ) -> Vec<ContactSet> {
-        let prediction = self.prediction();
+        let cap = self.prediction();
+        let (g, margin) = (self.gravity.norm(), self.params.margin);
         let mut sets = Vec::new();
+        let up = if g > 0.0 {
+            -self.gravity / g
+        } else {
+            Vec3::zeros()
+        };
         for &j in partners {
-            if j.id == own.id || !near(own, j, prediction) {
+            if j.id == own.id || !near(own, j, cap) {
                 continue;
             }
             let (a, b) = if own.id < j.id { (own, j) } else { (j, own) };
+            let reach = speculative_distance(a, Some(b), self.dt, g, margin, cap);
+            if !near(a, b, reach) {
+                continue;
+            }
             let m = match cache.binary_search_by_key(&(a.id, b.id), |e| (e.0, e.1)) {
                 Ok(pos) => cache[pos].2.clone(),
                 Err(pos) => {
-                    let m = pair_manifold(a, b, prediction);
+                    let m = pair_manifold(a, b, reach);
                     cache.insert(pos, (a.id, b.id, m.clone()));
                     m
                 }
             };
             if let Some(m) = m {
-                sets.push(view(own, j, &m));
+                let mut set = view(own, j, &m);
+                // Shock propagation: a partner resting on `own` (normal pointing down
+                // towards `own`) is ignored; a partner `own` rests on is treated as immovable.
+                let up = set.points[0].normal.dot(&up);
+                if up < -SUPPORT_COSINE {
+                    continue;
+                }
+                if up > SUPPORT_COSINE {
+                    for p in &mut set.points {
+                        p.partner_inv_mass = 0.0;
+                    }
+                }
+                sets.push(set);
             }
         }
-        if let Some(env) = environment_contacts(own, &self.environment, prediction) {
+        let reach = speculative_distance(own, None, self.dt, g, margin, cap);
+        if let Some(env) = environment_contacts(own, &self.environment, reach) {
             sets.push(env);
         }
         sets

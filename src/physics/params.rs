@@ -18,6 +18,11 @@ pub struct SolverParams {
     pub max_speed: f32,
     /// Angular speed cap in rad/s.
     pub max_angular_speed: f32,
+    /// Largest separating speed at a contact point that a position correction may leave,
+    /// m/s (above restitution's own target).
+    pub max_separation_speed: f32,
+    /// Damping rate (1/s) of a touching body's velocity relative to what it touches.
+    pub contact_damping: f32,
 }
 
 impl Default for SolverParams {
@@ -29,6 +34,8 @@ impl Default for SolverParams {
             margin: 0.02,
             max_speed: 30.0,
             max_angular_speed: 60.0,
+            max_separation_speed: 0.1,
+            contact_damping: 0.0,
         }
     }
 }

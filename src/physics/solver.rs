@@ -55,9 +55,7 @@ pub(crate) fn solve_body(
     let mut scratch = vec![PointScratch::default(); count];
     let rest_threshold = 2.0 * gravity.norm() * h;
 
-    for s in 0..n_sub {
-        let tau0 = s as f32 * h;
-        let tau1 = tau0 + h;
+    for _ in 0..n_sub {
         // Relative normal velocity before the substep (for restitution).
         let mut k = 0;
         for set in sets {
@@ -92,7 +90,7 @@ pub(crate) fn solve_body(
                 for (m, cp) in set.points.iter().enumerate() {
                     let r = q * cp.anchor;
                     let pi = x + r;
-                    let pj = cp.partner_point + cp.partner_velocity * tau1;
+                    let pj = cp.partner_point + cp.partner_velocity * h;
                     let gap = cp.normal.dot(&(pi - pj));
                     if gap < 0.0 {
                         let w = inv_mass_at(&b, &q, &r, &cp.normal) + cp.partner_inv_mass;
@@ -121,15 +119,42 @@ pub(crate) fn solve_body(
         } else {
             (xp, qp)
         };
+        // The velocity a correction adds may cancel the approach but not fling the body:
+        // capped at the predicted speed plus the separation allowance (and the same, over
+        // the bounding radius, for spin).
+        let v_pred = b.linvel;
+        let w_pred = b.angvel;
+        let mut dv = (x1 - xp) / h;
+        let dv_cap = v_pred.norm() + p.max_separation_speed;
+        if dv.norm() > dv_cap {
+            dv *= dv_cap / dv.norm();
+        }
+        let mut dw = angular_velocity(&qp, &q1, h);
+        let dw_cap = w_pred.norm() + dv_cap / body.shape.bounding_radius();
+        if dw.norm() > dw_cap {
+            dw *= dw_cap / dw.norm();
+        }
         b.position = x1;
         b.rotation = q1;
-        b.linvel = (x1 - x0) / h;
-        b.angvel = angular_velocity(&q0, &q1, h);
+        b.linvel = v_pred + dv;
+        b.angvel = w_pred + dw;
 
+        let mut touching = 0u32;
+        let mut partner_vel = Vec3::zeros();
         // Velocity pass: per active point, remove approach velocity (or reflect it with the
         // restitution) and apply Coulomb friction bounded by the normal impulse.
         let mut k = 0;
         for set in sets {
+            if set.points.len() > 0 && (0..set.points.len()).any(|m| scratch[k + m].lambda > 0.0) {
+                touching += 1;
+                let n = set.points.len() as f32;
+                partner_vel += set
+                    .points
+                    .iter()
+                    .map(|cp| cp.partner_velocity)
+                    .sum::<Vec3>()
+                    / n;
+            }
             for cp in &set.points {
                 let sc = scratch[k];
                 k += 1;
@@ -148,6 +173,14 @@ pub(crate) fn solve_body(
                 };
                 if vn < target {
                     dv += cp.normal * (target - vn);
+                } else if vn > target.max(p.max_separation_speed) {
+                    // Depenetration must not fling bodies: the separating speed a position
+                    // correction produced is capped (the whole excess is removed on i's side).
+                    let excess = vn - target.max(p.max_separation_speed);
+                    let w_i = inv_mass_at(&b, &b.rotation, &r, &cp.normal);
+                    let imp = -cp.normal * (excess / w_i);
+                    b.linvel += imp * b.inv_mass;
+                    b.angvel += inv_inertia_world(&b, &b.rotation, &r.cross(&imp));
                 }
                 let vt_len = vt.norm();
                 if vt_len > 0.0 {
@@ -168,6 +201,14 @@ pub(crate) fn solve_body(
                     b.angvel += inv_inertia_world(&b, &b.rotation, &r.cross(&imp));
                 }
             }
+        }
+        // Contact damping: a body touching something loses a fraction of its velocity
+        // relative to the mean velocity of what it touches (rest, for static surfaces).
+        if p.contact_damping > 0.0 && touching > 0 {
+            let f = 1.0 / (1.0 + h * p.contact_damping);
+            let mean = partner_vel / touching as f32;
+            b.linvel = mean + (b.linvel - mean) * f;
+            b.angvel *= f;
         }
     }
     b
