@@ -48,9 +48,6 @@ fn main() {
     if let Some(v) = env("SEP") {
         params.max_separation_speed = v;
     }
-    if let Some(v) = env("DAMP") {
-        params.contact_damping = v;
-    }
     if let Some(v) = env("VX") {
         b.velocity(stack as u64 - 1, [v, 0.0, 0.0]);
     }

@@ -22,9 +22,6 @@ fn main() {
     if let Some(v) = env("SEP") {
         params.max_separation_speed = v;
     }
-    if let Some(v) = env("DAMP") {
-        params.contact_damping = v;
-    }
     let mut sim = Simulation::new(scene);
     let t = std::time::Instant::now();
     for s in 0..steps {

@@ -117,8 +117,7 @@ impl Grid {
 
     /// Cells of the 27-neighbourhood of `c` that exist in the grid, in slot order.
     pub fn neighbours(&self, c: CellCoord) -> impl Iterator<Item = CellCoord> + '_ {
-        (0..27).filter_map(move |k| {
-            let k = k as i32;
+        (0..27i32).filter_map(move |k| {
             let n = c.offset([k % 3 - 1, (k / 3) % 3 - 1, k / 9 - 1]);
             self.contains(n).then_some(n)
         })

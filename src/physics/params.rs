@@ -21,8 +21,6 @@ pub struct SolverParams {
     /// Largest separating speed at a contact point that a position correction may leave,
     /// m/s (above restitution's own target).
     pub max_separation_speed: f32,
-    /// Damping rate (1/s) of a touching body's velocity relative to what it touches.
-    pub contact_damping: f32,
 }
 
 impl Default for SolverParams {
@@ -35,7 +33,6 @@ impl Default for SolverParams {
             max_speed: 30.0,
             max_angular_speed: 60.0,
             max_separation_speed: 0.1,
-            contact_damping: 0.0,
         }
     }
 }

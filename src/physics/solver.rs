@@ -139,22 +139,10 @@ pub(crate) fn solve_body(
         b.linvel = v_pred + dv;
         b.angvel = w_pred + dw;
 
-        let mut touching = 0u32;
-        let mut partner_vel = Vec3::zeros();
         // Velocity pass: per active point, remove approach velocity (or reflect it with the
         // restitution) and apply Coulomb friction bounded by the normal impulse.
         let mut k = 0;
         for set in sets {
-            if set.points.len() > 0 && (0..set.points.len()).any(|m| scratch[k + m].lambda > 0.0) {
-                touching += 1;
-                let n = set.points.len() as f32;
-                partner_vel += set
-                    .points
-                    .iter()
-                    .map(|cp| cp.partner_velocity)
-                    .sum::<Vec3>()
-                    / n;
-            }
             for cp in &set.points {
                 let sc = scratch[k];
                 k += 1;
@@ -201,14 +189,6 @@ pub(crate) fn solve_body(
                     b.angvel += inv_inertia_world(&b, &b.rotation, &r.cross(&imp));
                 }
             }
-        }
-        // Contact damping: a body touching something loses a fraction of its velocity
-        // relative to the mean velocity of what it touches (rest, for static surfaces).
-        if p.contact_damping > 0.0 && touching > 0 {
-            let f = 1.0 / (1.0 + h * p.contact_damping);
-            let mean = partner_vel / touching as f32;
-            b.linvel = mean + (b.linvel - mean) * f;
-            b.angvel *= f;
         }
     }
     b

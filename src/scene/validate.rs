@@ -112,6 +112,13 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
     )?;
     c.positive("solver.max_speed", s.max_speed)?;
     c.positive("solver.max_angular_speed", s.max_angular_speed)?;
+    c.range(
+        "solver.max_separation_speed",
+        s.max_separation_speed,
+        0.0,
+        100.0,
+        "must be between 0 and 100 m/s",
+    )?;
     if let Some(e) = scene.cell_edge {
         c.positive("cell_edge", e)?;
     }

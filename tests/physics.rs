@@ -1,0 +1,191 @@
+//! Physical behaviour of the rigid-body cell model in the reference run.
+
+use soda::physics::{Material, Shape};
+use soda::sim::{measure, Simulation};
+use soda::{RigidBodyModel, SceneBuilder};
+
+fn only_body(sim: &Simulation) -> soda::Body {
+    sim.state().sorted::<RigidBodyModel>()[0].clone()
+}
+
+#[test]
+fn free_fall_follows_the_analytic_trajectory_within_the_integrators_error() {
+    let mut b = SceneBuilder::new([-5.0, -60.0, -5.0], [5.0, 10.0, 5.0]).ground(None);
+    b.body(
+        Shape::Ball { radius: 0.5 },
+        Material::default(),
+        [0.0, 5.0, 0.0],
+        [0.0; 3],
+    );
+    let scene = b.build().unwrap();
+    let (dt, substeps) = (scene.dt, scene.solver.substeps);
+    let mut sim = Simulation::new(scene);
+    for n in 1..=120u32 {
+        sim.step();
+        let t = n as f32 * dt;
+        let y = only_body(&sim).position.y;
+        let exact = 5.0 - 0.5 * 9.81 * t * t;
+        // Semi-implicit Euler with substep h overshoots the fall by g·h·t/2.
+        let h = dt / substeps as f32;
+        let bound = 9.81 * h * t / 2.0 + 1e-4;
+        assert!(
+            (y - exact).abs() <= bound,
+            "t={t}: y={y}, exact={exact}, bound={bound}"
+        );
+        let v = only_body(&sim).linvel.y;
+        assert!((v + 9.81 * t).abs() < 1e-3 * (1.0 + t), "t={t}: v={v}");
+    }
+}
+
+#[test]
+fn ball_bounces_back_to_restitution_squared_of_its_drop_height() {
+    let e = 0.6f32;
+    let drop = 3.0f32;
+    let mut b =
+        SceneBuilder::new([-5.0, -1.0, -5.0], [5.0, 10.0, 5.0]).environment_material(0.5, e);
+    let mat = Material {
+        density: 1.0,
+        friction: 0.5,
+        restitution: e,
+    };
+    b.body(
+        Shape::Ball { radius: 0.5 },
+        mat,
+        [0.0, 0.5 + drop, 0.0],
+        [0.0; 3],
+    );
+    let mut sim = Simulation::new(b.build().unwrap());
+    let mut bounced = false;
+    let mut apex = 0.0f32;
+    for _ in 0..240 {
+        sim.step();
+        let body = only_body(&sim);
+        if body.linvel.y > 0.5 {
+            bounced = true;
+        }
+        if bounced {
+            apex = apex.max(body.position.y - 0.5);
+        }
+        if bounced && body.linvel.y < -0.5 {
+            break;
+        }
+    }
+    assert!(bounced, "the ball never bounced");
+    let expected = e * e * drop;
+    assert!(
+        (apex - expected).abs() <= 0.1 * expected,
+        "rebound apex {apex} m, expected e²·h = {expected} m (±10 %)"
+    );
+}
+
+#[test]
+fn cube_dropped_tilted_on_the_ground_comes_to_rest_flat() {
+    let mut b = SceneBuilder::new([-5.0, -1.0, -5.0], [5.0, 10.0, 5.0]);
+    b.body(
+        Shape::Cuboid {
+            half_extents: [0.5; 3],
+        },
+        Material::default(),
+        [0.0, 2.0, 0.0],
+        [0.3, 0.1, 0.2],
+    );
+    let mut sim = Simulation::new(b.build().unwrap());
+    for _ in 0..240 {
+        sim.step();
+    }
+    let body = only_body(&sim);
+    assert!(body.linvel.norm() < 0.01, "still moving: {:?}", body.linvel);
+    assert!(
+        body.angvel.norm() < 0.01,
+        "still spinning: {:?}",
+        body.angvel
+    );
+    assert!(
+        (body.position.y - 0.5).abs() < 0.005,
+        "centre height {}",
+        body.position.y
+    );
+    // Flat: one body axis is vertical.
+    let best = [
+        soda::math::Vec3::x(),
+        soda::math::Vec3::y(),
+        soda::math::Vec3::z(),
+    ]
+    .iter()
+    .map(|a| (body.rotation * a).y.abs())
+    .fold(0.0f32, f32::max);
+    assert!(
+        best > 0.9999,
+        "no face is flat on the ground: best |cos| = {best}"
+    );
+    let r = measure(sim.reference());
+    assert!(
+        r.max_penetration < 0.005,
+        "penetration {}",
+        r.max_penetration
+    );
+}
+
+#[test]
+fn ten_cube_column_stands_and_comes_to_rest() {
+    let mut b = SceneBuilder::new([-5.0, -1.0, -5.0], [5.0, 20.0, 5.0]);
+    for k in 0..10 {
+        b.body(
+            Shape::Cuboid {
+                half_extents: [0.5; 3],
+            },
+            Material::default(),
+            [0.0, 0.5 + 1.01 * k as f32, 0.0],
+            [0.0; 3],
+        );
+    }
+    let mut sim = Simulation::new(b.build().unwrap());
+    for _ in 0..300 {
+        sim.step();
+    }
+    let r = measure(sim.reference());
+    assert!(r.max_speed < 0.01, "max speed {}", r.max_speed);
+    assert!(
+        (r.max_height - 9.5).abs() < 0.02,
+        "top centre at {}",
+        r.max_height
+    );
+    assert!(
+        r.max_penetration < 0.005,
+        "penetration {}",
+        r.max_penetration
+    );
+}
+
+#[test]
+fn same_scene_twice_gives_the_same_hash_sequence() {
+    let scene = soda::scene::builtin::builtin("falling-cubes", Some(64), 3).unwrap();
+    let run = |scene: soda::Scene| {
+        let mut sim = Simulation::new(scene);
+        (0..120).map(|_| sim.step().hash).collect::<Vec<_>>()
+    };
+    assert_eq!(run(scene.clone()), run(scene));
+}
+
+/// Issue 2's settling bar for 1,000 falling cubes after 10 simulated seconds.
+#[test]
+#[ignore = "known failure: the landing cascade flings 1 of 1,000 cubes out of the domain (physics-quality issue 3); run with --ignored"]
+fn falling_cubes_1000_settle_within_ten_seconds() {
+    let scene = soda::scene::builtin::builtin("falling-cubes", Some(1000), 0).unwrap();
+    let mut sim = Simulation::new(scene);
+    let report = sim.run(600, |_, _| {});
+    let r = &report.last;
+    assert_eq!(report.left_domain_events, 0, "bodies left the domain");
+    assert_eq!(r.bodies, 1000);
+    assert!(r.max_speed <= 0.2, "max speed {}", r.max_speed);
+    assert!(
+        r.max_penetration <= 0.02,
+        "max penetration {}",
+        r.max_penetration
+    );
+    assert!(
+        r.min_height >= 0.48,
+        "a body sank: lowest centre {}",
+        r.min_height
+    );
+}
