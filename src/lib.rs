@@ -16,6 +16,7 @@ pub mod exec;
 pub mod frame;
 pub mod grid;
 pub mod hash;
+pub mod kernel;
 pub mod math;
 pub mod model;
 pub mod physics;

@@ -2,3 +2,4 @@
 //! frames; the reference is the oracle.
 
 pub mod reference;
+pub mod virtual_exec;

@@ -1,0 +1,377 @@
+//! The virtual executor: one thread runs N worlds under a scheduler that chooses, at every
+//! decision, either a world to act or an in-flight message to deliver — so deliveries are
+//! delayed and reordered at will, and an anti-message may overtake its positive twin.
+//!
+//! The scheduler is a ChaCha8 generator ([`ScheduleSpec::Seeded`]), fuzz bytes
+//! ([`ScheduleSpec::Bytes`]), a recorded decision list ([`ScheduleSpec::Replay`]) or the
+//! deterministic FIFO fallback. Every decision is an index into the list of enabled actions
+//! (the worlds that want to act, ascending, then the in-flight messages in send order); the
+//! recorded list prints as a string ([`VirtualRun::schedule_string`]) that replays the run
+//! exactly ([`parse_schedule`]).
+//!
+//! After every decision GVT is recomputed exactly (minimum of the worlds' bounds and of the
+//! in-flight messages' `affects` steps); when it advances, the steps below it are committed
+//! — every world's states at that step merged and hashed as the reference hashes them —
+//! handed to the sink in step order, and the worlds fossil-collect.
+
+use crate::frame::{Event, Frame};
+use crate::grid::Grid;
+use crate::kernel::config::{KernelConfig, ScheduleSpec};
+use crate::kernel::counters::Counters;
+use crate::kernel::gvt::global_virtual_time;
+use crate::kernel::message::Message;
+use crate::kernel::partition::{Partition, WorldId};
+use crate::kernel::world::World;
+use crate::model::{CellModel, Step};
+use crate::state::{canonical_hash, CellStates};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// Prefix of schedule strings.
+const SCHEDULE_PREFIX: &str = "v1:";
+
+/// Parses a string printed by [`VirtualRun::schedule_string`] into a replay schedule.
+pub fn parse_schedule(s: &str) -> Result<ScheduleSpec, String> {
+    let body = s
+        .trim()
+        .strip_prefix(SCHEDULE_PREFIX)
+        .ok_or_else(|| format!("a schedule string starts with {SCHEDULE_PREFIX:?}"))?;
+    if body.is_empty() {
+        return Ok(ScheduleSpec::Replay(Vec::new()));
+    }
+    body.split('.')
+        .map(|t| {
+            t.parse::<u32>()
+                .map_err(|e| format!("bad decision {t:?}: {e}"))
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map(ScheduleSpec::Replay)
+}
+
+enum Chooser {
+    Seeded(ChaCha8Rng),
+    Bytes(Vec<u8>, usize),
+    Replay(Vec<u32>, usize),
+    Fifo,
+}
+
+impl Chooser {
+    fn new(spec: &ScheduleSpec) -> Self {
+        match spec {
+            ScheduleSpec::Seeded(s) => Chooser::Seeded(ChaCha8Rng::seed_from_u64(*s)),
+            ScheduleSpec::Bytes(b) => Chooser::Bytes(b.clone(), 0),
+            ScheduleSpec::Replay(d) => Chooser::Replay(d.clone(), 0),
+            ScheduleSpec::Fifo => Chooser::Fifo,
+        }
+    }
+
+    /// Index into `acts` enabled worlds followed by `msgs` in-flight messages.
+    fn choose(&mut self, acts: usize, msgs: usize, turn: u64) -> usize {
+        let total = acts + msgs;
+        let fifo = |turn: u64| {
+            if msgs > 0 {
+                acts
+            } else {
+                (turn % acts as u64) as usize
+            }
+        };
+        match self {
+            Chooser::Seeded(rng) => {
+                if msgs > 0 && (acts == 0 || rng.random_bool(0.5)) {
+                    acts + rng.random_range(0..msgs)
+                } else {
+                    rng.random_range(0..acts)
+                }
+            }
+            Chooser::Bytes(b, pos) => {
+                let need = if total > 256 { 2 } else { 1 };
+                if *pos + need > b.len() {
+                    return fifo(turn);
+                }
+                let mut v = b[*pos] as usize;
+                if need == 2 {
+                    v = v << 8 | b[*pos + 1] as usize;
+                }
+                *pos += need;
+                v % total
+            }
+            Chooser::Replay(d, pos) => match d.get(*pos) {
+                Some(&i) if (i as usize) < total => {
+                    *pos += 1;
+                    i as usize
+                }
+                _ => {
+                    *pos = usize::MAX / 2;
+                    fifo(turn)
+                }
+            },
+            Chooser::Fifo => fifo(turn),
+        }
+    }
+}
+
+/// A Time Warp run of a cell model on the virtual executor.
+pub struct VirtualRun<M: CellModel> {
+    grid: Arc<Grid>,
+    partition: Arc<Partition>,
+    worlds: Vec<World<M>>,
+    pool: Vec<Message<M::State>>,
+    in_flight: BTreeMap<Step, usize>,
+    chooser: Chooser,
+    record: bool,
+    decisions: Vec<u32>,
+    turn: u64,
+    gvt: Step,
+    committed: Step,
+    end: Step,
+    gvt_advances: u64,
+}
+
+impl<M: CellModel> VirtualRun<M> {
+    /// A run of `config.worlds` worlds starting at step 0 from `initial`. Entities outside
+    /// the grid are dropped and reported as `LeftDomain` events (as by the reference).
+    ///
+    /// # Panics
+    /// If `config.worlds` is 0 or an explicit partition does not fit the grid.
+    pub fn new(
+        model: M,
+        grid: Grid,
+        initial: Vec<M::State>,
+        config: &KernelConfig,
+    ) -> (Self, Vec<Event>) {
+        assert!(config.worlds >= 1, "at least one world");
+        let positions: Vec<[f32; 3]> = initial.iter().map(M::position).collect();
+        let mut events = Vec::new();
+        let state = CellStates::binned::<M>(&grid, initial, 0, &mut events);
+        let partition = Arc::new(Partition::build(
+            &config.partition,
+            &grid,
+            config.worlds,
+            &positions,
+            config.partition_seed,
+        ));
+        let model = Arc::new(model);
+        let grid = Arc::new(grid);
+        let mut worlds: Vec<World<M>> = (0..partition.worlds() as WorldId)
+            .map(|w| {
+                World::new(
+                    w,
+                    model.clone(),
+                    grid.clone(),
+                    partition.clone(),
+                    config,
+                    &state,
+                )
+            })
+            .collect();
+        let mut run = VirtualRun {
+            grid,
+            partition,
+            worlds: Vec::new(),
+            pool: Vec::new(),
+            in_flight: BTreeMap::new(),
+            chooser: Chooser::new(&config.schedule),
+            record: config.record_schedule,
+            decisions: Vec::new(),
+            turn: 0,
+            gvt: 1,
+            committed: 0,
+            end: 0,
+            gvt_advances: 0,
+        };
+        for w in &mut worlds {
+            let msgs = w.start();
+            run.post(msgs);
+        }
+        run.worlds = worlds;
+        (run, events)
+    }
+
+    /// The same run with its schedule driven by `bytes` (for fuzzing).
+    pub fn from_bytes(
+        model: M,
+        grid: Grid,
+        initial: Vec<M::State>,
+        config: &KernelConfig,
+        bytes: &[u8],
+    ) -> (Self, Vec<Event>) {
+        let mut c = config.clone();
+        c.schedule = ScheduleSpec::Bytes(bytes.to_vec());
+        Self::new(model, grid, initial, &c)
+    }
+
+    fn post(&mut self, msgs: Vec<Message<M::State>>) {
+        for m in msgs {
+            *self.in_flight.entry(m.affects()).or_default() += 1;
+            self.pool.push(m);
+        }
+    }
+
+    /// The last committed step (0 before any).
+    pub fn committed_step(&self) -> Step {
+        self.committed
+    }
+
+    /// Current GVT: the smallest step whose state may still change.
+    pub fn gvt(&self) -> Step {
+        self.gvt
+    }
+
+    /// The partition in use.
+    pub fn partition(&self) -> &Partition {
+        &self.partition
+    }
+
+    /// The grid.
+    pub fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    /// Counters per world and in total.
+    pub fn counters(&self) -> Counters {
+        let mut c = Counters::from_worlds(
+            self.worlds.iter().map(|w| w.counters().clone()).collect(),
+            self.gvt_advances,
+            self.gvt,
+        );
+        c.decisions = self.turn;
+        c
+    }
+
+    /// The decisions taken so far, as a string [`parse_schedule`] turns back into a schedule
+    /// that replays this run exactly (empty unless `record_schedule`).
+    pub fn schedule_string(&self) -> String {
+        let d: Vec<String> = self.decisions.iter().map(|d| d.to_string()).collect();
+        format!("{SCHEDULE_PREFIX}{}", d.join("."))
+    }
+
+    /// Runs until `steps` more steps are committed, returning their frames in step order.
+    pub fn run(&mut self, steps: u64) -> Vec<Frame> {
+        let mut frames = Vec::new();
+        self.run_with(steps, |f| frames.push(f));
+        frames
+    }
+
+    /// Runs until `steps` more steps are committed, handing each committed frame to `sink`
+    /// in step order.
+    pub fn run_with(&mut self, steps: u64, mut sink: impl FnMut(Frame)) {
+        let target = self.committed + steps;
+        self.end = self.end.max(target);
+        for w in &mut self.worlds {
+            w.set_end(target);
+        }
+        self.update_gvt(&mut sink);
+        while self.committed < target {
+            self.decide();
+            self.update_gvt(&mut sink);
+        }
+    }
+
+    fn decide(&mut self) {
+        let gvt = self.gvt;
+        let acts: Vec<usize> = (0..self.worlds.len())
+            .filter(|&w| self.worlds[w].wants_to_act(gvt))
+            .collect();
+        assert!(
+            !acts.is_empty() || !self.pool.is_empty(),
+            "kernel deadlock at GVT {gvt}: no world can act and no message is in flight"
+        );
+        let i = self.chooser.choose(acts.len(), self.pool.len(), self.turn);
+        self.turn += 1;
+        if self.record {
+            self.decisions.push(i as u32);
+        }
+        if i < acts.len() {
+            let msgs = self.worlds[acts[i]].act(gvt);
+            self.post(msgs);
+        } else {
+            let m = self.pool.remove(i - acts.len());
+            let a = m.affects();
+            let n = self.in_flight.get_mut(&a).expect("counted in flight");
+            *n -= 1;
+            if *n == 0 {
+                self.in_flight.remove(&a);
+            }
+            self.worlds[m.dst_world as usize].receive(m);
+        }
+    }
+
+    fn update_gvt(&mut self, sink: &mut impl FnMut(Frame)) {
+        let new = global_virtual_time(
+            self.worlds.iter().map(|w| w.bound()),
+            self.in_flight.keys().next().copied(),
+        )
+        .unwrap_or(self.end + 1)
+        .min(self.end + 1);
+        debug_assert!(new >= self.gvt, "GVT went back from {} to {new}", self.gvt);
+        if new <= self.gvt {
+            return;
+        }
+        self.gvt = new;
+        self.gvt_advances += 1;
+        while self.committed + 1 < new {
+            let t = self.committed + 1;
+            let frame = self.frame(t);
+            for w in &mut self.worlds {
+                w.note_committed(t);
+            }
+            self.committed = t;
+            sink(frame);
+        }
+        for w in &mut self.worlds {
+            w.sample_log_bytes();
+            w.fossil_collect(new - 1);
+        }
+    }
+
+    fn frame(&self, t: Step) -> Frame {
+        let mut all: Vec<&M::State> = self.worlds.iter().flat_map(|w| w.state_at(t)).collect();
+        all.sort_by_key(|s| M::id(s));
+        let mut events: Vec<Event> = self
+            .worlds
+            .iter()
+            .flat_map(|w| w.events_at(t - 1))
+            .copied()
+            .collect();
+        events.sort();
+        Frame {
+            step: t,
+            hash: canonical_hash::<M>(all.iter().copied()),
+            bodies: all.len(),
+            events,
+        }
+    }
+}
+
+/// What [`run_virtual`] returns.
+#[derive(Clone, Debug)]
+pub struct VirtualReport {
+    /// Committed frames, steps 1..=N.
+    pub frames: Vec<Frame>,
+    /// Counters.
+    pub counters: Counters,
+    /// The replay string (empty decisions unless `record_schedule`).
+    pub schedule: String,
+    /// `LeftDomain` events of initial states outside the grid.
+    pub initial_events: Vec<Event>,
+}
+
+/// Runs `model` from `initial` for `steps` steps on the virtual executor.
+pub fn run_virtual<M: CellModel>(
+    model: M,
+    grid: Grid,
+    initial: Vec<M::State>,
+    config: &KernelConfig,
+    steps: u64,
+) -> VirtualReport {
+    let (mut run, initial_events) = VirtualRun::new(model, grid, initial, config);
+    let frames = run.run(steps);
+    VirtualReport {
+        frames,
+        counters: run.counters(),
+        schedule: run.schedule_string(),
+        initial_events,
+    }
+}

@@ -1,0 +1,193 @@
+//! The configuration of a Time Warp run: number of worlds, rollback mode, optimism window,
+//! partitioner and the virtual executor's schedule.
+
+use serde::{Deserialize, Serialize};
+
+/// How a world repairs a straggler (SPEC-kernel.md §Rollback modes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum RollbackMode {
+    /// Rollback-and-Propagate: recompute only the cells whose inputs changed, compare their
+    /// outputs with the log, propagate only what changed, stop when nothing changed.
+    #[default]
+    Cell,
+    /// Classic Time Warp: recompute every cell of the world from the straggler's step on.
+    World,
+    /// No speculation: a cell computes step `t` only once its 27 neighbours are known at
+    /// `t` (null messages for empty borders). Never rolls back.
+    Conservative,
+}
+
+impl RollbackMode {
+    /// Parses `cell`, `world` or `conservative`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "cell" => Some(Self::Cell),
+            "world" => Some(Self::World),
+            "conservative" => Some(Self::Conservative),
+            _ => None,
+        }
+    }
+
+    /// The name `parse` accepts.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Cell => "cell",
+            Self::World => "world",
+            Self::Conservative => "conservative",
+        }
+    }
+}
+
+/// How cells are assigned to worlds (see [`crate::kernel::partition`]).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum PartitionKind {
+    /// Axis-aligned blocks: the world count factored over the three axes.
+    #[default]
+    Blocks,
+    /// The thesis's setup (§3.2.4): equal-size k-means over body positions (seeded by
+    /// `KernelConfig::partition_seed`), each cell to the world with most bodies in it, empty
+    /// cells to the nearest centroid.
+    KMeans,
+    /// Every cell to a uniformly random world (seeded by `partition_seed`): the most
+    /// fragmented territories, for tests.
+    Random,
+    /// An explicit owner per cell (linear cell index order).
+    Explicit(Vec<u32>),
+}
+
+impl PartitionKind {
+    /// Parses `blocks`, `kmeans` or `random`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "blocks" => Some(Self::Blocks),
+            "kmeans" => Some(Self::KMeans),
+            "random" => Some(Self::Random),
+            _ => None,
+        }
+    }
+}
+
+/// Who decides, in the virtual executor, which world acts next and which in-flight message
+/// is delivered next.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ScheduleSpec {
+    /// A ChaCha8 generator with this seed. Replays exactly from the seed.
+    Seeded(u64),
+    /// The recorded decisions of an earlier run (see `VirtualRun::schedule_string`), then the
+    /// deterministic fallback.
+    Replay(Vec<u32>),
+    /// Fuzz bytes: each decision consumes one or two bytes, then the deterministic fallback.
+    Bytes(Vec<u8>),
+    /// The deterministic fallback only: deliver the oldest in-flight message first, else let
+    /// the worlds act in turn.
+    Fifo,
+}
+
+impl Default for ScheduleSpec {
+    fn default() -> Self {
+        ScheduleSpec::Seeded(0)
+    }
+}
+
+/// Deliberate bugs, for proving that the determinism tests can fail. Never use them.
+#[doc(hidden)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+pub enum PlantedBug {
+    /// No bug.
+    #[default]
+    None,
+    /// Lazy cancellation compares re-executed outputs by body ids only, so a straggler that
+    /// changes values but not membership is not propagated.
+    CutoffByIdsOnly,
+    /// An anti-message that would leave nothing in its place (the output became empty) is
+    /// not sent.
+    DropLoneAnti,
+}
+
+/// The configuration of a kernel run.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct KernelConfig {
+    /// Number of worlds (logical processes), at least 1.
+    pub worlds: usize,
+    /// Rollback mode.
+    pub mode: RollbackMode,
+    /// Optimism window `W` ≥ 1: after computing a step, a world holds at most `W`
+    /// uncommitted states (no world computes past GVT + W − 1).
+    pub window: u64,
+    /// Partitioner.
+    pub partition: PartitionKind,
+    /// Seed of the k-means and random partitioners.
+    pub partition_seed: u64,
+    /// The virtual executor's schedule.
+    pub schedule: ScheduleSpec,
+    /// Record the virtual executor's decisions so the run can print a replay string
+    /// (costs four bytes per decision).
+    pub record_schedule: bool,
+    /// A deliberate bug, for tests that prove the checks can fire.
+    #[doc(hidden)]
+    pub planted_bug: PlantedBug,
+}
+
+impl Default for KernelConfig {
+    fn default() -> Self {
+        KernelConfig {
+            worlds: 4,
+            mode: RollbackMode::Cell,
+            window: 16,
+            partition: PartitionKind::Blocks,
+            partition_seed: 0,
+            schedule: ScheduleSpec::Seeded(0),
+            record_schedule: true,
+            planted_bug: PlantedBug::None,
+        }
+    }
+}
+
+impl KernelConfig {
+    /// The default configuration with `worlds` worlds.
+    pub fn new(worlds: usize) -> Self {
+        KernelConfig {
+            worlds,
+            ..Self::default()
+        }
+    }
+
+    /// Sets the rollback mode.
+    pub fn mode(mut self, mode: RollbackMode) -> Self {
+        self.mode = mode;
+        self
+    }
+
+    /// Sets the optimism window.
+    pub fn window(mut self, window: u64) -> Self {
+        self.window = window;
+        self
+    }
+
+    /// Sets the partitioner.
+    pub fn partition(mut self, partition: PartitionKind) -> Self {
+        self.partition = partition;
+        self
+    }
+
+    /// Sets the partitioner's seed.
+    pub fn partition_seed(mut self, seed: u64) -> Self {
+        self.partition_seed = seed;
+        self
+    }
+
+    /// Sets the schedule.
+    pub fn schedule(mut self, schedule: ScheduleSpec) -> Self {
+        self.schedule = schedule;
+        self
+    }
+
+    /// Turns decision recording on or off.
+    pub fn record_schedule(mut self, on: bool) -> Self {
+        self.record_schedule = on;
+        self
+    }
+}

@@ -1,0 +1,81 @@
+//! Messages between worlds and their total order.
+//!
+//! Every message is about the state of cells at one step (`step`): a *ghost* carries the
+//! whole state of a border cell at `step` to a world that owns one of its neighbours; a
+//! *migrate* carries the bodies that the computation of cell `src_cell` at `step − 1` homes,
+//! at `step`, in cells of the destination world. A positive message is identified by
+//! (kind, step, source cell, destination world, sequence number); its anti-message carries
+//! the same identity and no bodies. Inputs are not messages between worlds here (see
+//! SPEC-kernel.md §Inputs).
+
+use super::partition::WorldId;
+use crate::model::Step;
+
+/// What a message is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum MessageKind {
+    /// The state of a border cell at `step`.
+    Ghost,
+    /// Bodies arriving at `step` in the destination world's cells.
+    Migrate,
+}
+
+/// Positive message or anti-message. Anti sorts first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Sign {
+    /// Cancels the positive message with the same identity.
+    Anti,
+    /// Carries bodies.
+    Positive,
+}
+
+/// The total order in which a world applies the messages it has received:
+/// (step, kind, source cell, sequence number, sign). Together with the destination world
+/// this identifies a message uniquely; arrival order never matters.
+pub type MessageKey = (Step, MessageKind, u32, u32, Sign);
+
+/// A timestamped message from one world to another.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Message<S> {
+    /// The step of the states it describes.
+    pub step: Step,
+    /// Ghost or migrate.
+    pub kind: MessageKind,
+    /// Positive or anti.
+    pub sign: Sign,
+    /// Sending world.
+    pub src_world: WorldId,
+    /// Receiving world.
+    pub dst_world: WorldId,
+    /// Linear index of the cell the message comes from (the ghosted cell, or the cell whose
+    /// computation produced the migrating bodies).
+    pub src_cell: u32,
+    /// Sequence number of this version of the (kind, step, src cell, dst world) content.
+    pub seq: u32,
+    /// `(home cell at step, state)` pairs sorted by (cell, id); empty for anti-messages and
+    /// null messages.
+    pub bodies: Vec<(u32, S)>,
+}
+
+impl<S> Message<S> {
+    /// The key of the total application order.
+    pub fn key(&self) -> MessageKey {
+        (self.step, self.kind, self.src_cell, self.seq, self.sign)
+    }
+
+    /// The earliest step whose state this message may still change: a ghost of step `t`
+    /// changes computations at `t`, hence states at `t + 1`; a migrate of step `t` changes
+    /// states at `t`. GVT is bounded by this value while the message is in flight or
+    /// unprocessed.
+    pub fn affects(&self) -> Step {
+        match self.kind {
+            MessageKind::Ghost => self.step + 1,
+            MessageKind::Migrate => self.step,
+        }
+    }
+
+    /// Whether this is an anti-message.
+    pub fn is_anti(&self) -> bool {
+        self.sign == Sign::Anti
+    }
+}

@@ -1,0 +1,31 @@
+//! The Time Warp kernel: territories, messages, worlds (logical processes with per-cell
+//! checkpoint logs), the GVT rule and counters. Pure and single-threaded: no threads, no
+//! I/O, no clocks. Executors (`crate::exec`) drive worlds and carry messages between them.
+//!
+//! The contract is in SPEC-kernel.md (to be merged into SPEC.md): the state of a cell at a
+//! step is the unit of logs, ghosts and comparison; messages are applied in a total order
+//! (never arrival order); committed steps are bit-identical to the reference run whatever
+//! the partition, rollback mode, window and delivery order.
+//!
+//! Modules, lowest first:
+//! - [`config`]: the run configuration (worlds, mode, window, partition, schedule);
+//! - [`partition`]: cell → world maps (blocks, equal-size k-means, random, explicit);
+//! - [`message`]: ghost / migrate / anti-messages and their total order;
+//! - [`counters`]: per-world and total statistics and their formulas;
+//! - [`gvt`]: the global virtual time rule;
+//! - [`world`]: one logical process (receive, act, fossil-collect);
+//! - [`synthetic`]: a tiny non-physics cell model for tests, benches and fuzzing.
+
+pub mod config;
+pub mod counters;
+pub mod gvt;
+pub mod message;
+pub mod partition;
+pub mod synthetic;
+pub mod world;
+
+pub use config::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
+pub use counters::{Counters, WorldCounters};
+pub use message::{Message, MessageKey, MessageKind, Sign};
+pub use partition::{Partition, WorldId};
+pub use world::World;

@@ -1,0 +1,944 @@
+//! A world: one logical process owning a territory of cells (SPEC-kernel.md §World).
+//!
+//! Pure and single-threaded. An executor hands it messages ([`World::receive`]), lets it act
+//! ([`World::act`], which returns the messages it sends), asks for its GVT bound
+//! ([`World::bound`]), reads committed states and events, and fossil-collects.
+//!
+//! The unit of everything is *the state of a cell at a step*: the id-sorted states of the
+//! entities homed in that cell at that step. A world keeps, for every step from GVT − 1 to
+//! its head, one slot holding, per own cell: its state, and the output of its computation
+//! (the bodies it homes at the next step, with their home cells, and its events); per
+//! foreign neighbour cell: the ghost state received; per (own destination cell, foreign
+//! source cell): the bodies migrating in; and the logs of messages received and sent.
+//!
+//! The state of own cell `d` at `t + 1` is rebuilt, whenever one of its inputs changes, as the
+//! id-sorted union of the outputs at `t` of the own cells around it that land in `d` and the
+//! migrations into `d` at `t + 1`. A change of a state at step `t` re-sends its ghost (lazily)
+//! and, if the world has already computed step `t`, makes the own cells around it dirty at
+//! `t` — that is a rollback. Re-executing a dirty cell compares the new output with the log;
+//! only a different output changes states at `t + 1` (early cut-off) and re-sends migrations.
+
+use super::config::{KernelConfig, PlantedBug, RollbackMode};
+use super::counters::WorldCounters;
+use super::message::{Message, MessageKey, MessageKind, Sign};
+use super::partition::{Partition, WorldId};
+use crate::frame::{Event, EventKind};
+use crate::grid::Grid;
+use crate::hash::StateHash;
+use crate::model::{CellModel, Neighbourhood, Step};
+use crate::state::CellStates;
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::sync::Arc;
+
+/// The output of one cell computation: the bodies it homes at the next step, as
+/// `(home cell, state)` sorted by (cell, id), and the events it raised.
+#[derive(Clone, Debug)]
+struct Out<S> {
+    bodies: Vec<(u32, S)>,
+    events: Vec<Event>,
+}
+
+impl<S> Out<S> {
+    fn empty() -> Self {
+        Out {
+            bodies: Vec::new(),
+            events: Vec::new(),
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.bodies.is_empty() && self.events.is_empty()
+    }
+
+    /// The bodies homed in `cell`.
+    fn into_cell(&self, cell: u32) -> &[(u32, S)] {
+        let lo = self.bodies.partition_point(|(c, _)| *c < cell);
+        let hi = self.bodies.partition_point(|(c, _)| *c <= cell);
+        &self.bodies[lo..hi]
+    }
+}
+
+/// What a world has received under one identity (kind, step, source cell).
+#[derive(Debug)]
+struct Recv<S> {
+    /// Live positive versions: (seq, bodies).
+    positives: Vec<(u32, Vec<(u32, S)>)>,
+    /// Anti-messages that arrived before their positive twin.
+    antis: Vec<u32>,
+}
+
+impl<S> Default for Recv<S> {
+    fn default() -> Self {
+        Recv {
+            positives: Vec::new(),
+            antis: Vec::new(),
+        }
+    }
+}
+
+impl<S> Recv<S> {
+    /// The effective version: the live positive with the highest sequence number.
+    fn effective(&self) -> Option<&(u32, Vec<(u32, S)>)> {
+        self.positives.iter().max_by_key(|p| p.0)
+    }
+}
+
+/// The last version sent under one identity (kind, step, source cell, destination world).
+#[derive(Debug)]
+struct Sent<S> {
+    seq: u32,
+    live: Option<Vec<(u32, S)>>,
+}
+
+/// Everything a world holds about one step.
+#[derive(Debug)]
+struct Slot<S> {
+    states: Vec<Vec<S>>,
+    outs: Vec<Option<Out<S>>>,
+    known: Vec<bool>,
+    ghosts: BTreeMap<u32, Vec<S>>,
+    ghost_known: BTreeSet<u32>,
+    foreign_in: BTreeMap<(u32, u32), Vec<S>>,
+    migrate_known: BTreeSet<u32>,
+    recv: BTreeMap<(MessageKind, u32), Recv<S>>,
+    sent: BTreeMap<(MessageKind, u32, WorldId), Sent<S>>,
+}
+
+impl<S: Clone> Slot<S> {
+    fn new(n: usize) -> Self {
+        Slot {
+            states: vec![Vec::new(); n],
+            outs: (0..n).map(|_| None).collect(),
+            known: vec![false; n],
+            ghosts: BTreeMap::new(),
+            ghost_known: BTreeSet::new(),
+            foreign_in: BTreeMap::new(),
+            migrate_known: BTreeSet::new(),
+            recv: BTreeMap::new(),
+            sent: BTreeMap::new(),
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        let s = std::mem::size_of::<S>();
+        let p = std::mem::size_of::<(u32, S)>();
+        let v = std::mem::size_of::<Vec<S>>();
+        let mut b = self.states.len() * (v + std::mem::size_of::<Option<Out<S>>>() + 1);
+        b += self.states.iter().map(|c| c.len() * s).sum::<usize>();
+        for o in self.outs.iter().flatten() {
+            b += o.bodies.len() * p + o.events.len() * std::mem::size_of::<Event>();
+        }
+        b += self
+            .ghosts
+            .values()
+            .map(|g| v + 8 + g.len() * s)
+            .sum::<usize>();
+        b += self
+            .foreign_in
+            .values()
+            .map(|g| v + 8 + g.len() * s)
+            .sum::<usize>();
+        for r in self.recv.values() {
+            b += 16 + r.antis.len() * 4;
+            b += r.positives.iter().map(|x| v + x.1.len() * p).sum::<usize>();
+        }
+        for x in self.sent.values() {
+            b += 24 + x.live.as_ref().map_or(0, |l| l.len() * p);
+        }
+        b + (self.ghost_known.len() + self.migrate_known.len()) * 8
+    }
+}
+
+/// One logical process (see the module doc).
+pub struct World<M: CellModel> {
+    id: WorldId,
+    model: Arc<M>,
+    grid: Arc<Grid>,
+    part: Arc<Partition>,
+    mode: RollbackMode,
+    window: Step,
+    bug: PlantedBug,
+    cells: Vec<u32>,
+    targets: Vec<Vec<WorldId>>,
+    base: Step,
+    head: Step,
+    end: Step,
+    next: Vec<Step>,
+    slots: VecDeque<Slot<M::State>>,
+    dirty: BTreeMap<Step, BTreeSet<u32>>,
+    inbox: BTreeMap<MessageKey, Message<M::State>>,
+    counters: WorldCounters,
+    scratch: Vec<M::State>,
+}
+
+/// Whether two states are the same bits: equal and hashing equal (so `0.0` and `-0.0`, which
+/// compare equal, still differ).
+fn same_state<M: CellModel>(a: &M::State, b: &M::State) -> bool {
+    if a != b {
+        return false;
+    }
+    let (mut ha, mut hb) = (StateHash::new(), StateHash::new());
+    M::hash_state(a, &mut ha);
+    M::hash_state(b, &mut hb);
+    ha.finish() == hb.finish()
+}
+
+impl<M: CellModel> World<M> {
+    /// World `id` of `part`, starting at step 0 from `initial` (binned over `grid`).
+    pub fn new(
+        id: WorldId,
+        model: Arc<M>,
+        grid: Arc<Grid>,
+        part: Arc<Partition>,
+        config: &KernelConfig,
+        initial: &CellStates<M::State>,
+    ) -> Self {
+        let cells = part.cells_of(id).to_vec();
+        let targets = cells
+            .iter()
+            .map(|&c| {
+                let mut t: Vec<WorldId> = grid
+                    .neighbours(grid.coord(c as usize))
+                    .map(|n| part.owner_of(&grid, n))
+                    .filter(|&w| w != id)
+                    .collect();
+                t.sort_unstable();
+                t.dedup();
+                t
+            })
+            .collect();
+        let mut slot = Slot::new(cells.len());
+        for (x, &c) in cells.iter().enumerate() {
+            slot.states[x] = initial.cell_at(c as usize).to_vec();
+            slot.known[x] = true;
+        }
+        let n = cells.len();
+        World {
+            id,
+            model,
+            grid,
+            part,
+            mode: config.mode,
+            window: config.window.max(1),
+            bug: config.planted_bug,
+            cells,
+            targets,
+            base: 0,
+            head: 0,
+            end: 0,
+            next: vec![0; n],
+            slots: VecDeque::from([slot]),
+            dirty: BTreeMap::new(),
+            inbox: BTreeMap::new(),
+            counters: WorldCounters::default(),
+            scratch: Vec::new(),
+        }
+    }
+
+    /// This world's id.
+    pub fn id(&self) -> WorldId {
+        self.id
+    }
+
+    /// The cells it owns (linear indices, ascending).
+    pub fn cells(&self) -> &[u32] {
+        &self.cells
+    }
+
+    /// Its counters.
+    pub fn counters(&self) -> &WorldCounters {
+        &self.counters
+    }
+
+    /// Lets the world compute up to (not including) step `end`, i.e. produce states up to
+    /// `end`.
+    pub fn set_end(&mut self, end: Step) {
+        self.end = self.end.max(end);
+    }
+
+    /// The initial messages: ghosts of the border cells at step 0.
+    pub fn start(&mut self) -> Vec<Message<M::State>> {
+        let mut out = Vec::new();
+        for x in 0..self.cells.len() {
+            self.send_ghost(x, 0, &mut out);
+        }
+        out
+    }
+
+    /// Local virtual time: the next step this world will (re)compute (optimistic modes), or
+    /// the smallest next step over its cells (conservative).
+    pub fn lvt(&self) -> Step {
+        if self.mode == RollbackMode::Conservative {
+            self.next.iter().copied().min().unwrap_or(self.end)
+        } else {
+            let d = self.dirty.keys().next().copied().unwrap_or(Step::MAX);
+            self.head.min(d)
+        }
+    }
+
+    /// Its GVT bound (see [`crate::kernel::gvt`]): `lvt() + 1` and the `affects` step of every
+    /// unprocessed message.
+    pub fn bound(&self) -> Step {
+        let inbox = self
+            .inbox
+            .values()
+            .map(|m| m.affects())
+            .min()
+            .unwrap_or(Step::MAX);
+        (self.lvt() + 1).min(inbox)
+    }
+
+    /// Puts a message in the inbox. It is applied at the next [`World::act`], in the total
+    /// order of [`MessageKey`].
+    pub fn receive(&mut self, msg: Message<M::State>) {
+        debug_assert_eq!(msg.dst_world, self.id);
+        let prev = self.inbox.insert(msg.key(), msg);
+        debug_assert!(prev.is_none(), "duplicate message");
+    }
+
+    /// Whether acting now may do something (it may still find nothing to do in
+    /// conservative mode, where cells wait for their neighbours).
+    pub fn wants_to_act(&self, gvt: Step) -> bool {
+        if !self.inbox.is_empty() {
+            return true;
+        }
+        let lvt = self.lvt();
+        if self.mode == RollbackMode::Conservative {
+            lvt < self.end && lvt + 1 < gvt + self.window
+        } else {
+            !self.dirty.is_empty() || (self.head < self.end && self.head + 1 < gvt + self.window)
+        }
+    }
+
+    /// One action: apply the inbox in key order, then re-execute the earliest dirty step, or
+    /// compute the next step if the window allows. Returns the messages sent.
+    pub fn act(&mut self, gvt: Step) -> Vec<Message<M::State>> {
+        let mut out = Vec::new();
+        if self.mode == RollbackMode::Conservative {
+            self.act_conservative(gvt, &mut out);
+            return out;
+        }
+        let had_inbox = !self.inbox.is_empty();
+        self.drain_inbox(&mut out);
+        if let Some(&s) = self.dirty.keys().next() {
+            self.reexecute(s, &mut out);
+        } else if self.head < self.end && self.head + 1 < gvt + self.window {
+            self.advance(&mut out);
+        } else if !had_inbox {
+            self.counters.idle_acts += 1;
+        }
+        out
+    }
+
+    /// The bodies of its cells at committed step `t` (any order).
+    pub fn state_at(&self, t: Step) -> impl Iterator<Item = &M::State> + '_ {
+        self.slots[self.si(t)].states.iter().flatten()
+    }
+
+    /// The events of its cells' computations at step `s` (any order).
+    pub fn events_at(&self, s: Step) -> impl Iterator<Item = &Event> + '_ {
+        self.slots[self.si(s)]
+            .outs
+            .iter()
+            .flatten()
+            .flat_map(|o| o.events.iter())
+    }
+
+    /// Records that step `t` was committed (counts the committed cell computations at
+    /// `t − 1`).
+    pub fn note_committed(&mut self, t: Step) {
+        self.counters.steps_committed += 1;
+        if t >= 1 {
+            let slot = &self.slots[self.si(t - 1)];
+            self.counters.cells_committed +=
+                slot.states.iter().filter(|c| !c.is_empty()).count() as u64;
+        }
+    }
+
+    /// Bytes held by the logs now.
+    pub fn log_bytes(&self) -> u64 {
+        self.slots.iter().map(|s| s.bytes()).sum::<usize>() as u64
+    }
+
+    /// Samples the log size into `peak_log_bytes`.
+    pub fn sample_log_bytes(&mut self) {
+        let b = self.log_bytes();
+        self.counters.peak_log_bytes = self.counters.peak_log_bytes.max(b);
+    }
+
+    /// Drops everything about steps before `keep_from` (pass GVT − 1: the states at GVT − 1
+    /// are final but computations at GVT − 1 may still be redone).
+    pub fn fossil_collect(&mut self, keep_from: Step) {
+        let keep_from = keep_from.min(self.base + self.slots.len() as Step - 1);
+        while self.base < keep_from {
+            self.slots.pop_front();
+            self.base += 1;
+        }
+    }
+
+    fn si(&self, t: Step) -> usize {
+        debug_assert!(t >= self.base, "step {t} below base {}", self.base);
+        (t - self.base) as usize
+    }
+
+    fn ensure_slot(&mut self, t: Step) {
+        while self.base + (self.slots.len() as Step) <= t {
+            self.slots.push_back(Slot::new(self.cells.len()));
+        }
+    }
+
+    fn is_own(&self, cell: u32) -> bool {
+        self.part.owner(cell) == self.id
+    }
+
+    /// Computes own cell `x` at step `s` from the states and ghosts held for `s`.
+    fn compute(&mut self, x: usize, s: Step) -> Out<M::State> {
+        let cell = self.cells[x];
+        let grid = &*self.grid;
+        let slot = &self.slots[(s - self.base) as usize];
+        let c = grid.coord(cell as usize);
+        let id = self.id;
+        let part = &*self.part;
+        let cells: [&[M::State]; 27] = std::array::from_fn(|k| {
+            let n = c.offset(Neighbourhood::<M::State>::offset(k));
+            if !grid.contains(n) {
+                return &[][..];
+            }
+            let ni = grid.index(n) as u32;
+            if part.owner(ni) == id {
+                &slot.states[part.local(ni) as usize][..]
+            } else {
+                slot.ghosts.get(&ni).map_or(&[][..], |v| &v[..])
+            }
+        });
+        let nb = Neighbourhood { centre: c, cells };
+        let mut events = Vec::new();
+        self.scratch.clear();
+        self.model
+            .step_cell(s, grid, &nb, &mut self.scratch, &mut events);
+        let mut bodies = Vec::with_capacity(self.scratch.len());
+        for b in self.scratch.drain(..) {
+            match grid.cell_of(M::position(&b)) {
+                Some(d) => {
+                    assert!(
+                        d.chebyshev(c) <= 1,
+                        "locality contract violated: body {} moved from cell {c:?} to {d:?} in one step",
+                        M::id(&b)
+                    );
+                    bodies.push((grid.index(d) as u32, b));
+                }
+                None => events.push(Event {
+                    step: s,
+                    body: M::id(&b),
+                    kind: EventKind::LeftDomain,
+                }),
+            }
+        }
+        bodies.sort_by_key(|(d, b)| (*d, M::id(b)));
+        self.counters.cells_computed += 1;
+        Out { bodies, events }
+    }
+
+    fn same_out(&self, a: &Out<M::State>, b: &Out<M::State>) -> bool {
+        a.events == b.events && self.same_pairs(&a.bodies, &b.bodies)
+    }
+
+    fn same_pairs(&self, a: &[(u32, M::State)], b: &[(u32, M::State)]) -> bool {
+        a.len() == b.len()
+            && a.iter().zip(b).all(|(x, y)| {
+                x.0 == y.0
+                    && if self.bug == PlantedBug::CutoffByIdsOnly {
+                        M::id(&x.1) == M::id(&y.1)
+                    } else {
+                        same_state::<M>(&x.1, &y.1)
+                    }
+            })
+    }
+
+    fn same_states(a: &[M::State], b: &[M::State]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| same_state::<M>(x, y))
+    }
+
+    /// Sends (kind, step, cell) to `w` with `content`: in conservative mode always (an empty
+    /// content is a null message); otherwise lazily — nothing if the live version sent
+    /// before has the same content, else an anti-message for it (if any) and the new
+    /// version (if not empty).
+    fn send(
+        &mut self,
+        kind: MessageKind,
+        step: Step,
+        cell: u32,
+        w: WorldId,
+        content: Vec<(u32, M::State)>,
+        out: &mut Vec<Message<M::State>>,
+    ) {
+        let conservative = self.mode == RollbackMode::Conservative;
+        let i = self.si(step);
+        let live = self.slots[i]
+            .sent
+            .get(&(kind, cell, w))
+            .and_then(|s| s.live.as_ref());
+        if !conservative {
+            let old: &[(u32, M::State)] = live.map_or(&[][..], |v| &v[..]);
+            if self.same_pairs(old, &content) {
+                return;
+            }
+        }
+        let entry = self.slots[i]
+            .sent
+            .entry((kind, cell, w))
+            .or_insert(Sent { seq: 0, live: None });
+        let me = self.id;
+        let bug = self.bug;
+        let msg = |sign, seq, bodies| Message {
+            step,
+            kind,
+            sign,
+            src_world: me,
+            dst_world: w,
+            src_cell: cell,
+            seq,
+            bodies,
+        };
+        if let Some(old) = entry.live.take() {
+            let lone = old.is_empty() || content.is_empty();
+            if !conservative && !(bug == PlantedBug::DropLoneAnti && lone) {
+                out.push(msg(Sign::Anti, entry.seq, Vec::new()));
+                self.counters.anti_messages_sent += 1;
+            }
+        }
+        if conservative || !content.is_empty() {
+            entry.seq += 1;
+            entry.live = Some(content.clone());
+            if content.is_empty() {
+                self.counters.null_messages_sent += 1;
+            }
+            out.push(msg(Sign::Positive, entry.seq, content));
+            self.counters.messages_sent += 1;
+            match kind {
+                MessageKind::Ghost => self.counters.ghosts_sent += 1,
+                MessageKind::Migrate => self.counters.migrates_sent += 1,
+            }
+        }
+    }
+
+    /// (Re)sends the ghost of own cell `x` at step `t` to every world owning a neighbour.
+    fn send_ghost(&mut self, x: usize, t: Step, out: &mut Vec<Message<M::State>>) {
+        if self.targets[x].is_empty() {
+            return;
+        }
+        let cell = self.cells[x];
+        let i = self.si(t);
+        let content: Vec<(u32, M::State)> = self.slots[i].states[x]
+            .iter()
+            .map(|b| (cell, b.clone()))
+            .collect();
+        for k in 0..self.targets[x].len() {
+            let w = self.targets[x][k];
+            self.send(MessageKind::Ghost, t, cell, w, content.clone(), out);
+        }
+    }
+
+    /// (Re)sends the bodies the computation of own cell `x` at `s` homes in world `w`'s cells.
+    fn send_migrate(&mut self, x: usize, s: Step, w: WorldId, out: &mut Vec<Message<M::State>>) {
+        let i = self.si(s);
+        let part = &*self.part;
+        let content: Vec<(u32, M::State)> = self.slots[i].outs[x]
+            .as_ref()
+            .map(|o| {
+                o.bodies
+                    .iter()
+                    .filter(|(d, _)| part.owner(*d) == w)
+                    .cloned()
+                    .collect()
+            })
+            .unwrap_or_default();
+        self.send(MessageKind::Migrate, s + 1, self.cells[x], w, content, out);
+    }
+
+    /// Rebuilds the state of own cell `d` at `t ≥ base + 1` from the outputs at `t − 1` of the
+    /// own cells around it and the migrations into it. Returns whether it changed.
+    fn rebuild_state(&mut self, d: u32, t: Step) -> bool {
+        let grid = &*self.grid;
+        let part = &*self.part;
+        let prev = &self.slots[(t - 1 - self.base) as usize];
+        let cur = &self.slots[(t - self.base) as usize];
+        let mut v: Vec<M::State> = Vec::new();
+        for n in grid.neighbours(grid.coord(d as usize)) {
+            let ni = grid.index(n) as u32;
+            if part.owner(ni) == self.id {
+                if let Some(o) = &prev.outs[part.local(ni) as usize] {
+                    v.extend(o.into_cell(d).iter().map(|p| p.1.clone()));
+                }
+            }
+        }
+        for (_, bs) in cur.foreign_in.range((d, 0)..=(d, u32::MAX)) {
+            v.extend(bs.iter().cloned());
+        }
+        v.sort_by_key(|b| M::id(b));
+        let ld = part.local(d) as usize;
+        let i = (t - self.base) as usize;
+        let changed = !Self::same_states(&v, &self.slots[i].states[ld]);
+        self.slots[i].states[ld] = v;
+        changed
+    }
+
+    /// Marks dirty at step `s < head` every own cell around `cell` whose computation at `s`
+    /// can produce something (occupied now, or produced something before). Returns whether
+    /// any was marked.
+    fn mark_dirty_around(&mut self, cell: u32, s: Step) -> bool {
+        let i = self.si(s);
+        let mut marked = false;
+        for n in self.grid.neighbours(self.grid.coord(cell as usize)) {
+            let ni = self.grid.index(n) as u32;
+            if !self.is_own(ni) {
+                continue;
+            }
+            let x = self.part.local(ni) as usize;
+            let slot = &self.slots[i];
+            if !slot.states[x].is_empty() || slot.outs[x].as_ref().is_some_and(|o| !o.is_empty()) {
+                self.dirty.entry(s).or_default().insert(x as u32);
+                marked = true;
+            }
+        }
+        marked
+    }
+
+    /// The state of own cell `d` at `t ≤ head` changed: re-send its ghost, and if step `t` was
+    /// computed, dirty its neighbourhood. Returns whether something became dirty.
+    fn on_state_change(&mut self, d: u32, t: Step, out: &mut Vec<Message<M::State>>) -> bool {
+        let x = self.part.local(d) as usize;
+        self.send_ghost(x, t, out);
+        t < self.head && self.mark_dirty_around(d, t)
+    }
+
+    fn drain_inbox(&mut self, out: &mut Vec<Message<M::State>>) {
+        let mut straggle: Option<(Step, bool)> = None;
+        while let Some((_, msg)) = self.inbox.pop_first() {
+            self.counters.messages_received += 1;
+            let positive = !msg.is_anti();
+            if let Some(s) = self.apply(msg, out) {
+                straggle = Some(match straggle {
+                    None => (s, positive),
+                    Some((s0, p)) => (s0.min(s), p || positive),
+                });
+            }
+        }
+        if let Some((s0, primary)) = straggle {
+            let len = self.head - s0;
+            let c = &mut self.counters;
+            if primary {
+                c.rollbacks_primary += 1;
+                c.rollback_length_primary += len;
+            } else {
+                c.rollbacks_secondary += 1;
+                c.rollback_length_secondary += len;
+            }
+            c.steps_rolled_back += len;
+            c.rollback_length_max = c.rollback_length_max.max(len);
+            if self.mode == RollbackMode::World {
+                let all: BTreeSet<u32> = (0..self.cells.len() as u32).collect();
+                for s in s0..self.head {
+                    self.dirty.insert(s, all.clone());
+                }
+            }
+        }
+    }
+
+    /// Applies one message (optimistic modes). Returns the step at which it made cells dirty,
+    /// if it did.
+    fn apply(&mut self, msg: Message<M::State>, out: &mut Vec<Message<M::State>>) -> Option<Step> {
+        let step = msg.step;
+        self.ensure_slot(step);
+        let i = self.si(step);
+        let src = msg.src_cell;
+        let kind = msg.kind;
+        let r = self.slots[i].recv.entry((kind, src)).or_default();
+        let before = r.effective().map(|e| e.0);
+        let old_cells: Vec<u32> = r
+            .effective()
+            .map(|e| e.1.iter().map(|p| p.0).collect())
+            .unwrap_or_default();
+        match msg.sign {
+            Sign::Positive => {
+                if let Some(k) = r.antis.iter().position(|&a| a == msg.seq) {
+                    r.antis.swap_remove(k);
+                    self.counters.annihilated += 1;
+                } else {
+                    r.positives.push((msg.seq, msg.bodies));
+                }
+            }
+            Sign::Anti => {
+                if let Some(k) = r.positives.iter().position(|p| p.0 == msg.seq) {
+                    r.positives.swap_remove(k);
+                    self.counters.annihilated += 1;
+                } else {
+                    r.antis.push(msg.seq);
+                }
+            }
+        }
+        let after = r.effective().map(|e| e.0);
+        if before == after {
+            return None;
+        }
+        let new: Vec<(u32, M::State)> = r.effective().map(|e| e.1.clone()).unwrap_or_default();
+        match kind {
+            MessageKind::Ghost => {
+                let slot = &mut self.slots[i];
+                if new.is_empty() {
+                    slot.ghosts.remove(&src);
+                } else {
+                    slot.ghosts
+                        .insert(src, new.into_iter().map(|p| p.1).collect());
+                }
+                if step < self.head {
+                    if self.mark_dirty_around(src, step) {
+                        return Some(step);
+                    }
+                    self.counters.stragglers_absorbed += 1;
+                }
+                None
+            }
+            MessageKind::Migrate => {
+                let mut dsts: Vec<u32> = old_cells;
+                dsts.extend(new.iter().map(|p| p.0));
+                dsts.sort_unstable();
+                dsts.dedup();
+                for &d in &dsts {
+                    assert!(
+                        self.is_own(d),
+                        "migration into a cell this world does not own"
+                    );
+                    let bodies: Vec<M::State> = new
+                        .iter()
+                        .filter(|p| p.0 == d)
+                        .map(|p| p.1.clone())
+                        .collect();
+                    let slot = &mut self.slots[i];
+                    if bodies.is_empty() {
+                        slot.foreign_in.remove(&(d, src));
+                    } else {
+                        slot.foreign_in.insert((d, src), bodies);
+                    }
+                }
+                let mut dirtied = false;
+                if step <= self.head {
+                    for &d in &dsts {
+                        if self.rebuild_state(d, step) {
+                            dirtied |= self.on_state_change(d, step, out);
+                        }
+                    }
+                    if step < self.head && !dirtied {
+                        self.counters.stragglers_absorbed += 1;
+                    }
+                }
+                dirtied.then_some(step)
+            }
+        }
+    }
+
+    /// Re-executes the dirty cells of step `s` (optimistic modes).
+    fn reexecute(&mut self, s: Step, out: &mut Vec<Message<M::State>>) {
+        let cells = self.dirty.remove(&s).unwrap_or_default();
+        self.counters.steps_computed += 1;
+        let i = self.si(s);
+        let mut changed_dst: BTreeSet<u32> = BTreeSet::new();
+        let mut changed_mig: BTreeSet<(usize, WorldId)> = BTreeSet::new();
+        for x in cells {
+            let x = x as usize;
+            let new = if self.slots[i].states[x].is_empty() {
+                Out::empty()
+            } else {
+                self.counters.cells_recomputed += 1;
+                self.compute(x, s)
+            };
+            let old = self.slots[i].outs[x].take().unwrap_or_else(Out::empty);
+            if self.same_out(&old, &new) {
+                self.slots[i].outs[x] = Some(old);
+                continue;
+            }
+            for (d, _) in old.bodies.iter().chain(new.bodies.iter()) {
+                if self.is_own(*d) {
+                    changed_dst.insert(*d);
+                } else {
+                    changed_mig.insert((x, self.part.owner(*d)));
+                }
+            }
+            self.slots[i].outs[x] = Some(new);
+        }
+        for d in changed_dst {
+            if self.rebuild_state(d, s + 1) {
+                self.on_state_change(d, s + 1, out);
+            }
+        }
+        for (x, w) in changed_mig {
+            self.send_migrate(x, s, w, out);
+        }
+    }
+
+    /// Computes step `head` → `head + 1` for every own cell (optimistic modes).
+    fn advance(&mut self, out: &mut Vec<Message<M::State>>) {
+        let h = self.head;
+        self.ensure_slot(h + 1);
+        self.counters.steps_computed += 1;
+        let i = self.si(h);
+        let mut dsts: BTreeSet<u32> = BTreeSet::new();
+        let mut migs: BTreeSet<(usize, WorldId)> = BTreeSet::new();
+        for x in 0..self.cells.len() {
+            let o = if self.slots[i].states[x].is_empty() {
+                Out::empty()
+            } else {
+                self.compute(x, h)
+            };
+            for (d, _) in &o.bodies {
+                if self.is_own(*d) {
+                    dsts.insert(*d);
+                } else {
+                    migs.insert((x, self.part.owner(*d)));
+                }
+            }
+            self.slots[i].outs[x] = Some(o);
+        }
+        dsts.extend(self.slots[i + 1].foreign_in.keys().map(|k| k.0));
+        for d in dsts {
+            self.rebuild_state(d, h + 1);
+        }
+        self.head = h + 1;
+        for (x, w) in migs {
+            self.send_migrate(x, h, w, out);
+        }
+        for x in 0..self.cells.len() {
+            if !self.slots[i + 1].states[x].is_empty() {
+                self.send_ghost(x, h + 1, out);
+            }
+        }
+    }
+
+    // ---- conservative mode ----
+
+    fn act_conservative(&mut self, gvt: Step, out: &mut Vec<Message<M::State>>) {
+        let lvt_before = self.lvt();
+        let mut progressed = !self.inbox.is_empty();
+        while let Some((_, msg)) = self.inbox.pop_first() {
+            self.counters.messages_received += 1;
+            debug_assert!(!msg.is_anti(), "conservative worlds never cancel");
+            let step = msg.step;
+            self.ensure_slot(step);
+            let i = self.si(step);
+            let src = msg.src_cell;
+            match msg.kind {
+                MessageKind::Ghost => {
+                    let slot = &mut self.slots[i];
+                    slot.ghost_known.insert(src);
+                    if !msg.bodies.is_empty() {
+                        slot.ghosts
+                            .insert(src, msg.bodies.into_iter().map(|p| p.1).collect());
+                    }
+                }
+                MessageKind::Migrate => {
+                    let slot = &mut self.slots[i];
+                    slot.migrate_known.insert(src);
+                    for (d, b) in msg.bodies {
+                        slot.foreign_in.entry((d, src)).or_default().push(b);
+                    }
+                    let grid = self.grid.clone();
+                    for n in grid.neighbours(grid.coord(src as usize)) {
+                        let ni = grid.index(n) as u32;
+                        if self.is_own(ni) {
+                            self.try_know(ni, step, out);
+                        }
+                    }
+                }
+            }
+        }
+        for x in 0..self.cells.len() {
+            progressed |= self.try_compute(x, gvt, out);
+        }
+        let lvt = self.lvt();
+        self.counters.steps_computed += lvt - lvt_before;
+        if !progressed {
+            self.counters.idle_acts += 1;
+        }
+    }
+
+    /// Whether the state of own cell `ni` (or the ghost of foreign cell `ni`) at `s` is known.
+    fn known(&self, ni: u32, s: Step) -> bool {
+        let slot = &self.slots[self.si(s)];
+        if self.is_own(ni) {
+            slot.known[self.part.local(ni) as usize]
+        } else {
+            slot.ghost_known.contains(&ni)
+        }
+    }
+
+    fn try_compute(&mut self, x: usize, gvt: Step, out: &mut Vec<Message<M::State>>) -> bool {
+        let s = self.next[x];
+        if s >= self.end || s + 1 >= gvt + self.window {
+            return false;
+        }
+        let i = self.si(s);
+        if !self.slots[i].known[x] {
+            return false;
+        }
+        let cell = self.cells[x];
+        let occupied = !self.slots[i].states[x].is_empty();
+        if occupied {
+            let c = self.grid.coord(cell as usize);
+            let ready = self
+                .grid
+                .neighbours(c)
+                .all(|n| self.known(self.grid.index(n) as u32, s));
+            if !ready {
+                return false;
+            }
+        }
+        let o = if occupied {
+            self.compute(x, s)
+        } else {
+            Out::empty()
+        };
+        self.ensure_slot(s + 1);
+        self.slots[i].outs[x] = Some(o);
+        self.next[x] = s + 1;
+        for k in 0..self.targets[x].len() {
+            let w = self.targets[x][k];
+            self.send_migrate(x, s, w, out);
+        }
+        let grid = self.grid.clone();
+        for n in grid.neighbours(grid.coord(cell as usize)) {
+            let ni = grid.index(n) as u32;
+            if self.is_own(ni) {
+                self.try_know(ni, s + 1, out);
+            }
+        }
+        true
+    }
+
+    /// Conservative: makes the state of own cell `d` at `t` known once every cell around it
+    /// has produced its output at `t − 1`; then sends its ghost (a null message if empty).
+    fn try_know(&mut self, d: u32, t: Step, out: &mut Vec<Message<M::State>>) {
+        if t < self.base + 1 {
+            return;
+        }
+        self.ensure_slot(t);
+        let x = self.part.local(d) as usize;
+        let (ip, i) = (self.si(t - 1), self.si(t));
+        if self.slots[i].known[x] {
+            return;
+        }
+        let ready = self.grid.neighbours(self.grid.coord(d as usize)).all(|n| {
+            let ni = self.grid.index(n) as u32;
+            if self.is_own(ni) {
+                self.slots[ip].outs[self.part.local(ni) as usize].is_some()
+            } else {
+                self.slots[i].migrate_known.contains(&ni)
+            }
+        });
+        if !ready {
+            return;
+        }
+        self.rebuild_state(d, t);
+        self.slots[i].known[x] = true;
+        self.send_ghost(x, t, out);
+    }
+}
