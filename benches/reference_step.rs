@@ -27,9 +27,11 @@ use std::time::Duration;
 const CUBES: usize = 1000;
 
 /// `(fall steps, settle steps)`: the real ones when cargo benchmarks (it passes `--bench`),
-/// a few steps when `cargo test --benches` only checks that the bench runs.
+/// a few steps when `cargo test --benches` or `cargo bench -- --test` only checks that the
+/// bench runs.
 fn steps() -> (usize, usize) {
-    if std::env::args().any(|a| a == "--bench") {
+    let args: Vec<String> = std::env::args().collect();
+    if args.iter().any(|a| a == "--bench") && !args.iter().any(|a| a == "--test") {
         (90, 300)
     } else {
         (3, 5)

@@ -16,7 +16,8 @@
 //!
 //! `cargo bench --bench vs_rapier` (cargo passes `--bench`) runs the full comparison, prints
 //! a markdown table and writes it as JSON to target/vs_rapier.json. Without `--bench` (as under
-//! `cargo test --benches`) it runs a 20-step smoke version on 1,000 cubes and writes nothing.
+//! `cargo test --benches`) or with `--test` (`cargo bench -- --test`) it runs a 20-step smoke
+//! version on 1,000 cubes and writes nothing.
 //! `SODA_BENCH_SIZES=1000,8000` selects the sizes (default both).
 
 mod common;
@@ -502,7 +503,8 @@ fn table(rows: &[Comparison]) -> String {
 }
 
 fn main() {
-    let full = std::env::args().any(|a| a == "--bench");
+    let args: Vec<String> = std::env::args().collect();
+    let full = args.iter().any(|a| a == "--bench") && !args.iter().any(|a| a == "--test");
     let steps = if full { FULL_STEPS } else { SMOKE_STEPS };
     let reps = if full {
         env_or("SODA_BENCH_REPS", 3usize).max(1)
