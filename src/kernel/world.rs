@@ -51,7 +51,7 @@ impl<S> Out<S> {
     }
 
     /// The bodies homed in `cell`.
-    fn into_cell(&self, cell: u32) -> &[(u32, S)] {
+    fn landing_in(&self, cell: u32) -> &[(u32, S)] {
         let lo = self.bodies.partition_point(|(c, _)| *c < cell);
         let hi = self.bodies.partition_point(|(c, _)| *c <= cell);
         &self.bodies[lo..hi]
@@ -169,6 +169,7 @@ pub struct World<M: CellModel> {
     inbox: BTreeMap<MessageKey, Message<M::State>>,
     counters: WorldCounters,
     scratch: Vec<M::State>,
+    trace: Option<Vec<(Step, u32)>>,
 }
 
 /// Whether two states are the same bits: equal and hashing equal (so `0.0` and `-0.0`, which
@@ -232,7 +233,23 @@ impl<M: CellModel> World<M> {
             inbox: BTreeMap::new(),
             counters: WorldCounters::default(),
             scratch: Vec::new(),
+            trace: None,
         }
+    }
+
+    /// Starts (or stops) recording every re-executed cell computation as (step, cell).
+    pub fn set_trace(&mut self, on: bool) {
+        self.trace = on.then(Vec::new);
+    }
+
+    /// The re-executed (step, cell) computations recorded since the last call, in order.
+    pub fn take_trace(&mut self) -> Vec<(Step, u32)> {
+        self.trace.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
+    /// This world's head: its states exist up to this step (optimistic modes).
+    pub fn head(&self) -> Step {
+        self.head
     }
 
     /// This world's id.
@@ -320,8 +337,12 @@ impl<M: CellModel> World<M> {
         }
         let had_inbox = !self.inbox.is_empty();
         self.drain_inbox(&mut out);
-        if let Some(&s) = self.dirty.keys().next() {
-            self.reexecute(s, &mut out);
+        if !self.dirty.is_empty() {
+            // Rollback and Propagate runs to the head in one action (thesis Algorithm 2), so
+            // other worlds see the repaired outputs as early as possible.
+            while let Some(&s) = self.dirty.keys().next() {
+                self.reexecute(s, &mut out);
+            }
         } else if self.head < self.end && self.head + 1 < gvt + self.window {
             self.advance(&mut out);
         } else if !had_inbox {
@@ -332,24 +353,37 @@ impl<M: CellModel> World<M> {
 
     /// The bodies of its cells at committed step `t` (any order).
     pub fn state_at(&self, t: Step) -> impl Iterator<Item = &M::State> + '_ {
-        self.slots[self.si(t)].states.iter().flatten()
+        self.slot(t)
+            .into_iter()
+            .flat_map(|s| s.states.iter().flatten())
+    }
+
+    /// Its view of the state of own cell `cell` at step `t`, if held.
+    pub fn cell_state(&self, cell: u32, t: Step) -> Option<&[M::State]> {
+        if !self.is_own(cell) {
+            return None;
+        }
+        self.slot(t)
+            .map(|s| &s.states[self.part.local(cell) as usize][..])
+    }
+
+    fn slot(&self, t: Step) -> Option<&Slot<M::State>> {
+        t.checked_sub(self.base)
+            .and_then(|i| self.slots.get(i as usize))
     }
 
     /// The events of its cells' computations at step `s` (any order).
     pub fn events_at(&self, s: Step) -> impl Iterator<Item = &Event> + '_ {
-        self.slots[self.si(s)]
-            .outs
-            .iter()
-            .flatten()
-            .flat_map(|o| o.events.iter())
+        self.slot(s)
+            .into_iter()
+            .flat_map(|s| s.outs.iter().flatten().flat_map(|o| o.events.iter()))
     }
 
     /// Records that step `t` was committed (counts the committed cell computations at
     /// `t − 1`).
     pub fn note_committed(&mut self, t: Step) {
         self.counters.steps_committed += 1;
-        if t >= 1 {
-            let slot = &self.slots[self.si(t - 1)];
+        if let Some(slot) = t.checked_sub(1).and_then(|p| self.slot(p)) {
             self.counters.cells_committed +=
                 slot.states.iter().filter(|c| !c.is_empty()).count() as u64;
         }
@@ -502,7 +536,8 @@ impl<M: CellModel> World<M> {
         };
         if let Some(old) = entry.live.take() {
             let lone = old.is_empty() || content.is_empty();
-            if !conservative && !(bug == PlantedBug::DropLoneAnti && lone) {
+            let dropped = bug == PlantedBug::DropLoneAnti && lone;
+            if !conservative && !dropped {
                 out.push(msg(Sign::Anti, entry.seq, Vec::new()));
                 self.counters.anti_messages_sent += 1;
             }
@@ -568,7 +603,7 @@ impl<M: CellModel> World<M> {
             let ni = grid.index(n) as u32;
             if part.owner(ni) == self.id {
                 if let Some(o) = &prev.outs[part.local(ni) as usize] {
-                    v.extend(o.into_cell(d).iter().map(|p| p.1.clone()));
+                    v.extend(o.landing_in(d).iter().map(|p| p.1.clone()));
                 }
             }
         }
@@ -750,6 +785,9 @@ impl<M: CellModel> World<M> {
                 Out::empty()
             } else {
                 self.counters.cells_recomputed += 1;
+                if let Some(t) = &mut self.trace {
+                    t.push((s, self.cells[x]));
+                }
                 self.compute(x, s)
             };
             let old = self.slots[i].outs[x].take().unwrap_or_else(Out::empty);
