@@ -14,7 +14,7 @@ use proptest::test_runner::{Config, TestRunner};
 use soda::kernel::PlantedBug;
 
 proptest! {
-    #![proptest_config(Config { cases: 48, max_shrink_iters: 200, ..Config::default() })]
+    #![proptest_config(Config { cases: 256, max_shrink_iters: 400, ..Config::default() })]
 
     #[test]
     fn committed_hashes_equal_reference_for_particles(c in case(particle_scene(), 5..40)) {
@@ -25,10 +25,10 @@ proptest! {
 }
 
 proptest! {
-    #![proptest_config(Config { cases: 12, max_shrink_iters: 50, ..Config::default() })]
+    #![proptest_config(Config { cases: 64, max_shrink_iters: 100, ..Config::default() })]
 
     #[test]
-    fn committed_hashes_equal_reference_for_rigid_bodies(c in case(rigid_scene(), 5..30)) {
+    fn committed_hashes_equal_reference_for_rigid_bodies(c in case(rigid_scene(), 10..80)) {
         if let Err(e) = property(&c, PlantedBug::None) {
             prop_assert!(false, "{}", e);
         }

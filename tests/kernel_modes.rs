@@ -1,0 +1,186 @@
+//! Properties of the rollback modes and of the virtual executor's schedules, on built-in
+//! scenes: conservative never rolls back; cell recomputes fewer cell-steps than world on the
+//! same schedules of sparse-gas; the virtual executor reproduces the reference snapshots of
+//! every built-in scene; a printed schedule replays exactly; fuzz bytes drive the scheduler.
+
+mod kernel_support;
+
+use kernel_support::{compare, reference};
+use soda::exec::virtual_exec::{parse_schedule, run_virtual, VirtualRun};
+use soda::hash::hex;
+use soda::kernel::synthetic::Particles;
+use soda::kernel::{KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::scene::builtin::builtin;
+
+#[test]
+fn conservative_never_rolls_back() {
+    let s = builtin("sparse-gas", Some(27), 3).unwrap();
+    let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());
+    let exp = reference(&m, &g, &b, 40);
+    for (worlds, part) in [
+        (2, PartitionKind::Blocks),
+        (5, PartitionKind::KMeans),
+        (9, PartitionKind::Random),
+    ] {
+        for seed in 0..4 {
+            for window in [1, 4, 64] {
+                let cfg = KernelConfig::new(worlds)
+                    .mode(RollbackMode::Conservative)
+                    .partition(part.clone())
+                    .window(window)
+                    .schedule(ScheduleSpec::Seeded(seed));
+                let c = compare(&m, &g, &b, &cfg, &exp).unwrap();
+                assert_eq!(c.total.rollbacks(), 0);
+                assert_eq!(c.total.cells_recomputed, 0);
+                assert_eq!(c.total.anti_messages_sent, 0);
+                assert_eq!(c.total.efficiency(), 1.0);
+            }
+        }
+    }
+}
+
+#[test]
+fn cell_recomputes_fewer_cell_steps_than_world_on_the_same_schedules_of_sparse_gas() {
+    let s = builtin("sparse-gas", Some(64), 1).unwrap();
+    let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());
+    let exp = reference(&m, &g, &b, 60);
+    let (mut cell, mut world) = (0, 0);
+    for seed in 0..4 {
+        let cfg = |mode| {
+            KernelConfig::new(8)
+                .mode(mode)
+                .window(16)
+                .schedule(ScheduleSpec::Seeded(seed))
+        };
+        let c = compare(&m, &g, &b, &cfg(RollbackMode::Cell), &exp).unwrap();
+        let w = compare(&m, &g, &b, &cfg(RollbackMode::World), &exp).unwrap();
+        cell += c.total.cells_recomputed;
+        world += w.total.cells_recomputed;
+    }
+    assert!(world > 0, "the schedules produced rollbacks");
+    assert!(
+        cell < world,
+        "cell recomputed {cell} cell-steps, world {world}"
+    );
+}
+
+/// The scene, size and seed named in a snapshot's first line, and its `step … hash …` lines.
+fn snapshot(name: &str) -> (usize, u64, Vec<String>) {
+    let path = format!(
+        "{}/tests/snapshots/snapshots__{name}.snap",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    let mut lines = text.lines().skip_while(|l| !l.starts_with("scene "));
+    let head: Vec<&str> = lines.next().expect("header").split_whitespace().collect();
+    let objects = head[3].parse().unwrap();
+    let seed = head[5].parse().unwrap();
+    (
+        objects,
+        seed,
+        lines
+            .filter(|l| l.starts_with("step"))
+            .map(String::from)
+            .collect(),
+    )
+}
+
+#[test]
+fn virtual_executor_reproduces_the_reference_snapshots_of_every_builtin_scene() {
+    for b in soda::scene::builtin::BUILTINS {
+        let (objects, seed, expected) = snapshot(b.name);
+        let s = builtin(b.name, Some(objects), seed).unwrap();
+        let steps = 150;
+        let cfg = KernelConfig::new(4)
+            .window(8)
+            .partition(PartitionKind::KMeans)
+            .schedule(ScheduleSpec::Seeded(11));
+        let r = run_virtual(s.model(), s.grid(), s.initial_bodies(), &cfg, steps);
+        let got: Vec<String> = r
+            .frames
+            .iter()
+            .filter(|f| f.step % 10 == 0 || f.step == steps)
+            .map(|f| {
+                format!(
+                    "step {:4} bodies {:3} hash {}",
+                    f.step,
+                    f.bodies,
+                    hex(f.hash)
+                )
+            })
+            .collect();
+        assert_eq!(got, expected, "{}", b.name);
+    }
+}
+
+#[test]
+fn a_printed_schedule_replays_exactly() {
+    let (m, g, b) = Particles::scene(40, [4, 3, 2], true, 5);
+    let cfg = KernelConfig::new(6)
+        .window(6)
+        .partition(PartitionKind::Random)
+        .schedule(ScheduleSpec::Seeded(99));
+    let first = run_virtual(m.clone(), g.clone(), b.clone(), &cfg, 30);
+    assert!(first.counters.total.rollbacks() > 0);
+    let replay = cfg
+        .clone()
+        .schedule(parse_schedule(&first.schedule).unwrap());
+    let second = run_virtual(m, g, b, &replay, 30);
+    assert_eq!(first.frames, second.frames);
+    assert_eq!(first.counters, second.counters);
+    assert_eq!(first.schedule, second.schedule);
+}
+
+#[test]
+fn fuzz_bytes_drive_the_scheduler_deterministically_and_correctly() {
+    let (m, g, b) = Particles::scene(30, [4, 2, 2], false, 8);
+    let exp = reference(&m, &g, &b, 25);
+    let cfg = KernelConfig::new(4).window(5);
+    for k in 0..8u8 {
+        let bytes: Vec<u8> = (0..600u32)
+            .map(|i| (i.wrapping_mul(97) as u8) ^ k.wrapping_mul(31))
+            .collect();
+        let run = |bytes: &[u8]| {
+            let (mut r, _) = VirtualRun::from_bytes(m.clone(), g.clone(), b.clone(), &cfg, bytes);
+            let f = r.run(25);
+            (f, r.counters())
+        };
+        let (f1, c1) = run(&bytes);
+        let (f2, c2) = run(&bytes);
+        assert_eq!(f1, exp);
+        assert_eq!((f1, c1), (f2, c2));
+    }
+}
+
+#[test]
+fn a_late_migration_across_a_border_commits_like_the_reference_under_any_schedule() {
+    // The row scene of the targeted tests, but run by the executor under many schedules.
+    let (m, g, _) = Particles::scene(0, [6, 1, 1], false, 0);
+    let b = vec![
+        soda::kernel::synthetic::Particle {
+            id: 0,
+            pos: [2.9, 0.5, 0.5],
+            vel: [0.0; 3],
+        },
+        soda::kernel::synthetic::Particle {
+            id: 1,
+            pos: [3.02, 0.5, 0.5],
+            vel: [-0.01, 0.0, 0.0],
+        },
+    ];
+    let exp = reference(&m, &g, &b, 20);
+    for mode in [
+        RollbackMode::Cell,
+        RollbackMode::World,
+        RollbackMode::Conservative,
+    ] {
+        for seed in 0..40 {
+            let cfg = KernelConfig::new(2)
+                .mode(mode)
+                .window(1 + seed % 9)
+                .partition(PartitionKind::Explicit(vec![0, 0, 0, 1, 1, 1]))
+                .schedule(ScheduleSpec::Seeded(seed));
+            compare(&m, &g, &b, &cfg, &exp).unwrap();
+        }
+    }
+}
