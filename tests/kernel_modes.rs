@@ -184,3 +184,19 @@ fn a_late_migration_across_a_border_commits_like_the_reference_under_any_schedul
         }
     }
 }
+
+#[test]
+fn fifo_schedule_applies_all_news_before_computing_so_never_rolls_back() {
+    let s = builtin("falling-cubes", Some(200), 0).unwrap();
+    let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());
+    let exp = reference(&m, &g, &b, 40);
+    for mode in [RollbackMode::Cell, RollbackMode::World] {
+        let cfg = KernelConfig::new(8)
+            .mode(mode)
+            .window(16)
+            .schedule(ScheduleSpec::Fifo);
+        let c = compare(&m, &g, &b, &cfg, &exp).unwrap();
+        assert_eq!(c.total.rollbacks(), 0);
+        assert_eq!(c.total.cells_recomputed, 0);
+    }
+}

@@ -68,15 +68,11 @@ impl Chooser {
     }
 
     /// Index into `acts` enabled worlds followed by `msgs` in-flight messages.
-    fn choose(&mut self, acts: usize, msgs: usize, turn: u64) -> usize {
+    /// `laggard` is the index (among the acts) of the first enabled world with a non-empty
+    /// inbox, or else of the enabled world with the smallest LVT.
+    fn choose(&mut self, acts: usize, msgs: usize, laggard: usize) -> usize {
         let total = acts + msgs;
-        let fifo = |turn: u64| {
-            if msgs > 0 {
-                acts
-            } else {
-                (turn % acts as u64) as usize
-            }
-        };
+        let fifo = |_: ()| if msgs > 0 { acts } else { laggard };
         match self {
             Chooser::Seeded(rng) => {
                 if rng.random_range(0..total) >= acts {
@@ -96,7 +92,7 @@ impl Chooser {
             Chooser::Bytes(b, pos) => {
                 let need = if total > 256 { 2 } else { 1 };
                 if *pos + need > b.len() {
-                    return fifo(turn);
+                    return fifo(());
                 }
                 let mut v = b[*pos] as usize;
                 if need == 2 {
@@ -112,10 +108,10 @@ impl Chooser {
                 }
                 _ => {
                     *pos = usize::MAX / 2;
-                    fifo(turn)
+                    fifo(())
                 }
             },
-            Chooser::Fifo => fifo(turn),
+            Chooser::Fifo => fifo(()),
         }
     }
 }
@@ -248,11 +244,30 @@ impl<M: CellModel> VirtualRun<M> {
         c
     }
 
+    /// Bytes held by all worlds' logs now.
+    pub fn log_bytes(&self) -> u64 {
+        self.worlds.iter().map(|w| w.log_bytes()).sum()
+    }
+
+    /// Steps held by the logs now, summed over worlds.
+    pub fn steps_held(&self) -> u64 {
+        self.worlds.iter().map(|w| w.steps_held()).sum()
+    }
+
     /// The decisions taken so far, as a string [`parse_schedule`] turns back into a schedule
     /// that replays this run exactly (empty unless `record_schedule`).
     pub fn schedule_string(&self) -> String {
         let d: Vec<String> = self.decisions.iter().map(|d| d.to_string()).collect();
         format!("{SCHEDULE_PREFIX}{}", d.join("."))
+    }
+
+    /// Lets the worlds compute up to step `end` even if the current `run` stops committing
+    /// earlier (to observe a run in the middle of its speculation).
+    pub fn set_horizon(&mut self, end: Step) {
+        self.end = self.end.max(end);
+        for w in &mut self.worlds {
+            w.set_end(self.end);
+        }
     }
 
     /// Runs until `steps` more steps are committed, returning their frames in step order.
@@ -286,7 +301,13 @@ impl<M: CellModel> VirtualRun<M> {
             !acts.is_empty() || !self.pool.is_empty(),
             "kernel deadlock at GVT {gvt}: no world can act and no message is in flight"
         );
-        let i = self.chooser.choose(acts.len(), self.pool.len(), self.turn);
+        let laggard = (0..acts.len())
+            .min_by_key(|&k| {
+                let w = &self.worlds[acts[k]];
+                (!w.has_inbox(), w.lvt(), k)
+            })
+            .unwrap_or(0);
+        let i = self.chooser.choose(acts.len(), self.pool.len(), laggard);
         self.turn += 1;
         if self.record {
             self.decisions.push(i as u32);

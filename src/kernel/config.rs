@@ -82,7 +82,9 @@ pub enum ScheduleSpec {
     /// Fuzz bytes: each decision consumes one or two bytes, then the deterministic fallback.
     Bytes(Vec<u8>),
     /// The deterministic fallback only: deliver the oldest in-flight message first, else let
-    /// the worlds act in turn.
+    /// a world with a non-empty inbox apply it, else let the world with the smallest LVT
+    /// compute (lowest id on ties). Worlds then advance in lockstep with no straggler: the
+    /// overhead of the kernel alone.
     Fifo,
 }
 

@@ -313,6 +313,11 @@ impl<M: CellModel> World<M> {
         debug_assert!(prev.is_none(), "duplicate message");
     }
 
+    /// Whether messages wait in the inbox.
+    pub fn has_inbox(&self) -> bool {
+        !self.inbox.is_empty()
+    }
+
     /// Whether acting now may do something (it may still find nothing to do in
     /// conservative mode, where cells wait for their neighbours).
     pub fn wants_to_act(&self, gvt: Step) -> bool {
@@ -327,17 +332,20 @@ impl<M: CellModel> World<M> {
         }
     }
 
-    /// One action: apply the inbox in key order, then re-execute the earliest dirty step, or
-    /// compute the next step if the window allows. Returns the messages sent.
+    /// One action: apply the whole inbox in key order if it is not empty; otherwise
+    /// re-execute the dirty steps up to the head (Rollback and Propagate), or compute the next
+    /// step if the window allows. Returns the messages sent. (Receiving and computing are
+    /// separate actions, so a schedule can let every world apply its news before anyone
+    /// computes.)
     pub fn act(&mut self, gvt: Step) -> Vec<Message<M::State>> {
         let mut out = Vec::new();
         if self.mode == RollbackMode::Conservative {
             self.act_conservative(gvt, &mut out);
             return out;
         }
-        let had_inbox = !self.inbox.is_empty();
-        self.drain_inbox(&mut out);
-        if !self.dirty.is_empty() {
+        if !self.inbox.is_empty() {
+            self.drain_inbox(&mut out);
+        } else if !self.dirty.is_empty() {
             // Rollback and Propagate runs to the head in one action (thesis Algorithm 2), so
             // other worlds see the repaired outputs as early as possible.
             while let Some(&s) = self.dirty.keys().next() {
@@ -345,7 +353,7 @@ impl<M: CellModel> World<M> {
             }
         } else if self.head < self.end && self.head + 1 < gvt + self.window {
             self.advance(&mut out);
-        } else if !had_inbox {
+        } else {
             self.counters.idle_acts += 1;
         }
         out
@@ -392,6 +400,11 @@ impl<M: CellModel> World<M> {
     /// Bytes held by the logs now.
     pub fn log_bytes(&self) -> u64 {
         self.slots.iter().map(|s| s.bytes()).sum::<usize>() as u64
+    }
+
+    /// Number of steps the logs hold now.
+    pub fn steps_held(&self) -> u64 {
+        self.slots.len() as u64
     }
 
     /// Samples the log size into `peak_log_bytes`.
@@ -856,7 +869,7 @@ impl<M: CellModel> World<M> {
 
     fn act_conservative(&mut self, gvt: Step, out: &mut Vec<Message<M::State>>) {
         let lvt_before = self.lvt();
-        let mut progressed = !self.inbox.is_empty();
+        let drain = !self.inbox.is_empty();
         while let Some((_, msg)) = self.inbox.pop_first() {
             self.counters.messages_received += 1;
             debug_assert!(!msg.is_anti(), "conservative worlds never cancel");
@@ -889,6 +902,10 @@ impl<M: CellModel> World<M> {
                 }
             }
         }
+        if drain {
+            return;
+        }
+        let mut progressed = false;
         for x in 0..self.cells.len() {
             progressed |= self.try_compute(x, gvt, out);
         }

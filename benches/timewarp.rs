@@ -1,0 +1,184 @@
+//! Time Warp measurements on the virtual executor, one run each (wall times on a shared
+//! 2-core machine are noisy; counters are exact and reproducible):
+//!
+//! 1. **Overhead**: `falling-cubes`, 8 worlds, `cell` mode, window 16, against the reference
+//!    run of the same steps — under the FIFO schedule (deliveries in order, worlds in turn:
+//!    the overhead of logs, messages and GVT alone) and under a seeded random schedule
+//!    (adds the cost of rollbacks).
+//! 2. **Rollback granularity**: `sparse-gas` and `falling-cubes`, 8 worlds, window 16, the
+//!    same seeded schedule for `cell`, `world` and `conservative`: cell computations,
+//!    re-executions, rollbacks, efficiency and wall time.
+//! 3. **Log memory** at window 64: `falling-cubes`, 8 worlds, `cell`, seeded schedule; bytes
+//!    held by the logs sampled along the run, bytes per body-step held.
+//!
+//! Sizes (environment): `TW_CUBES` (default 8000) and `TW_STEPS` (60) for 1 and 3;
+//! `TW_GAS` (1000), `TW_FC` (1000) and `TW_GRAN_STEPS` (120) for 2; `TW_LOG_STEPS` (240) for
+//! 3. `cargo bench --bench timewarp -- --test` (or `cargo test --benches`) runs a tiny
+//! version. Every run checks its final hash against the reference.
+//!
+//! Run: `cargo bench --bench timewarp`.
+
+use soda::exec::virtual_exec::VirtualRun;
+use soda::hash::hex;
+use soda::kernel::{Counters, KernelConfig, RollbackMode, ScheduleSpec};
+use soda::scene::builtin::builtin;
+use soda::scene::Scene;
+use soda::ReferenceRun;
+use std::time::Instant;
+
+fn quick() -> bool {
+    let args: Vec<String> = std::env::args().collect();
+    !args.iter().any(|a| a == "--bench") || args.iter().any(|a| a == "--test")
+}
+
+fn env(name: &str, default: u64, quick_value: u64) -> u64 {
+    if quick() {
+        return quick_value;
+    }
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// Reference wall time and final hash.
+fn reference(scene: &Scene, steps: u64) -> (f64, u64) {
+    let (mut r, _) = ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
+    let t = Instant::now();
+    let mut hash = 0;
+    for _ in 0..steps {
+        hash = r.advance().hash;
+    }
+    (t.elapsed().as_secs_f64(), hash)
+}
+
+/// Virtual-executor wall time, final hash and counters.
+fn virtual_run(scene: &Scene, cfg: &KernelConfig, steps: u64) -> (f64, u64, Counters) {
+    let (mut r, _) = VirtualRun::new(scene.model(), scene.grid(), scene.initial_bodies(), cfg);
+    let t = Instant::now();
+    let mut hash = 0;
+    r.run_with(steps, |f| hash = f.hash);
+    (t.elapsed().as_secs_f64(), hash, r.counters())
+}
+
+fn config(mode: RollbackMode, window: u64, schedule: ScheduleSpec) -> KernelConfig {
+    KernelConfig::new(8)
+        .mode(mode)
+        .window(window)
+        .schedule(schedule)
+        .record_schedule(false)
+}
+
+fn overhead() {
+    let cubes = env("TW_CUBES", 8000, 64) as usize;
+    let steps = env("TW_STEPS", 60, 5);
+    let scene = builtin("falling-cubes", Some(cubes), 0).expect("scene");
+    let (tr, hr) = reference(&scene, steps);
+    println!(
+        "overhead: falling-cubes {cubes}, {steps} steps, grid {:?}; reference {tr:.3} s ({:.0} body-steps/s), hash {}",
+        scene.grid().dims,
+        cubes as f64 * steps as f64 / tr,
+        hex(hr)
+    );
+    for (label, sched) in [
+        ("fifo", ScheduleSpec::Fifo),
+        ("seeded(1)", ScheduleSpec::Seeded(1)),
+    ] {
+        let (tv, hv, c) = virtual_run(&scene, &config(RollbackMode::Cell, 16, sched), steps);
+        assert_eq!(hv, hr, "virtual executor diverged from the reference");
+        println!(
+            "  virtual 8 worlds cell W16 {label:10}: {tv:.3} s = {:.3}x reference; rollbacks {}, cells computed {} (re-executed {}), efficiency {:.3}, messages {} + {} anti",
+            tv / tr,
+            c.total.rollbacks(),
+            c.total.cells_computed,
+            c.total.cells_recomputed,
+            c.total.efficiency(),
+            c.total.messages_sent,
+            c.total.anti_messages_sent
+        );
+    }
+}
+
+fn granularity() {
+    let steps = env("TW_GRAN_STEPS", 120, 8);
+    for (name, n) in [
+        ("sparse-gas", env("TW_GAS", 1000, 27)),
+        ("falling-cubes", env("TW_FC", 1000, 27)),
+    ] {
+        let scene = builtin(name, Some(n as usize), 0).expect("scene");
+        let (tr, hr) = reference(&scene, steps);
+        println!(
+            "granularity: {name} {n}, {steps} steps, 8 worlds, W16, schedule seeded(3); reference {tr:.3} s"
+        );
+        let mut recomputed = Vec::new();
+        for mode in [
+            RollbackMode::Cell,
+            RollbackMode::World,
+            RollbackMode::Conservative,
+        ] {
+            let (tv, hv, c) =
+                virtual_run(&scene, &config(mode, 16, ScheduleSpec::Seeded(3)), steps);
+            assert_eq!(hv, hr, "{name} {mode:?} diverged from the reference");
+            recomputed.push(c.total.cells_recomputed);
+            println!(
+                "  {:12}: {tv:.3} s ({:.3}x ref); cell-steps computed {}, re-executed {}, rollbacks {} (mean length {:.1}), efficiency {:.3}, messages {} + {} anti + {} null",
+                mode.name(),
+                tv / tr,
+                c.total.cells_computed,
+                c.total.cells_recomputed,
+                c.total.rollbacks(),
+                (c.total.rollback_length_primary + c.total.rollback_length_secondary) as f64
+                    / c.total.rollbacks().max(1) as f64,
+                c.total.efficiency(),
+                c.total.messages_sent - c.total.null_messages_sent,
+                c.total.anti_messages_sent,
+                c.total.null_messages_sent,
+            );
+        }
+        println!(
+            "  cell re-executes {:.1} % of world's cell-steps",
+            100.0 * recomputed[0] as f64 / recomputed[1].max(1) as f64
+        );
+    }
+}
+
+fn log_memory() {
+    let cubes = env("TW_CUBES", 8000, 64) as usize;
+    let steps = env("TW_LOG_STEPS", 240, 8);
+    let scene = builtin("falling-cubes", Some(cubes), 0).expect("scene");
+    let cfg = config(RollbackMode::Cell, 64, ScheduleSpec::Seeded(5));
+    let (mut r, _) = VirtualRun::new(scene.model(), scene.grid(), scene.initial_bodies(), &cfg);
+    println!("log memory: falling-cubes {cubes}, 8 worlds, cell, W64, seeded(5)");
+    r.set_horizon(steps + 64);
+    let chunk = (steps / 8).max(1);
+    let mut done = 0;
+    let t = Instant::now();
+    while done < steps {
+        r.run(chunk);
+        done += chunk;
+        let held = r.steps_held();
+        let bytes = r.log_bytes();
+        println!(
+            "  step {:6}: logs {:8.1} MiB over {held} world-steps = {:.0} B per body-step held (per-world steps held {:.1}, GVT {})",
+            r.committed_step(),
+            bytes as f64 / (1 << 20) as f64,
+            bytes as f64 / (cubes as f64 * held as f64 / 8.0),
+            held as f64 / 8.0,
+            r.gvt()
+        );
+    }
+    let c = r.counters();
+    println!(
+        "  peak {:.1} MiB (sum of per-world peaks) = {:.0} B per body-step at a full window ({} bodies x 65 steps); {:.1} s",
+        c.total.peak_log_bytes as f64 / (1 << 20) as f64,
+        c.total.peak_log_bytes as f64 / (cubes as f64 * 65.0),
+        cubes,
+        t.elapsed().as_secs_f64()
+    );
+}
+
+fn main() {
+    overhead();
+    granularity();
+    log_memory();
+}
