@@ -11,6 +11,9 @@
 //! 3. **Log memory** at window 64: `falling-cubes`, 8 worlds, `cell`, seeded schedule; bytes
 //!    held by the logs sampled along the run, bytes per body-step held.
 //!
+//! 4. **Log flatness** over 10,000 steps at window 64: synthetic particles (`TW_PARTICLES`,
+//!    default 2000; `TW_FLAT_STEPS`, default 10000), logs sampled every tenth of the run.
+//!
 //! Sizes (environment): `TW_CUBES` (default 8000) and `TW_STEPS` (60) for 1 and 3;
 //! `TW_GAS` (1000), `TW_FC` (1000) and `TW_GRAN_STEPS` (120) for 2; `TW_LOG_STEPS` (240) for
 //! 3. `cargo bench --bench timewarp -- --test` (or `cargo test --benches`) runs a tiny
@@ -20,6 +23,7 @@
 
 use soda::exec::virtual_exec::VirtualRun;
 use soda::hash::hex;
+use soda::kernel::synthetic::Particles;
 use soda::kernel::{Counters, KernelConfig, RollbackMode, ScheduleSpec};
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
@@ -177,8 +181,45 @@ fn log_memory() {
     );
 }
 
+/// Flatness of the logs over a long run: synthetic particles (cheap enough for 10,000 steps).
+fn log_flatness() {
+    let n = env("TW_PARTICLES", 2000, 50) as usize;
+    let steps = env("TW_FLAT_STEPS", 10_000, 40);
+    let (m, g, b) = Particles::scene(n, [16, 8, 16], false, 1);
+    let cfg = config(RollbackMode::Cell, 64, ScheduleSpec::Seeded(5));
+    let (mut r, _) = VirtualRun::new(m, g, b, &cfg);
+    r.set_horizon(steps + 64);
+    println!(
+        "log flatness: {n} synthetic particles in 16x8x16 cells, 8 worlds, cell, W64, seeded(5)"
+    );
+    let chunk = (steps / 10).max(1);
+    let t = Instant::now();
+    let mut done = 0;
+    while done < steps {
+        r.run(chunk);
+        done += chunk;
+        let held = r.steps_held();
+        let bytes = r.log_bytes();
+        println!(
+            "  step {:6}: logs {:7.2} MiB over {held:4} world-steps = {:.0} B per body-step held; peak so far {:.2} MiB",
+            r.committed_step(),
+            bytes as f64 / (1 << 20) as f64,
+            bytes as f64 / (n as f64 * held as f64 / 8.0),
+            r.counters().total.peak_log_bytes as f64 / (1 << 20) as f64,
+        );
+    }
+    let c = r.counters();
+    println!(
+        "  {:.1} s; efficiency {:.3}, rollbacks {}",
+        t.elapsed().as_secs_f64(),
+        c.total.efficiency(),
+        c.total.rollbacks()
+    );
+}
+
 fn main() {
     overhead();
     granularity();
     log_memory();
+    log_flatness();
 }
