@@ -16,10 +16,11 @@
 
 use crate::frame::{Event, Frame};
 use crate::grid::Grid;
+use crate::kernel::config::RollbackMode;
 use crate::kernel::config::{KernelConfig, ScheduleSpec};
 use crate::kernel::counters::Counters;
 use crate::kernel::gvt::global_virtual_time;
-use crate::kernel::message::Message;
+use crate::kernel::message::{Input, Message, MessageKind, Sign};
 use crate::kernel::partition::{Partition, WorldId};
 use crate::kernel::world::World;
 use crate::model::{CellModel, Step};
@@ -118,6 +119,8 @@ impl Chooser {
 
 /// A Time Warp run of a cell model on the virtual executor.
 pub struct VirtualRun<M: CellModel> {
+    config: KernelConfig,
+    inputs: u32,
     grid: Arc<Grid>,
     partition: Arc<Partition>,
     worlds: Vec<World<M>>,
@@ -129,6 +132,7 @@ pub struct VirtualRun<M: CellModel> {
     turn: u64,
     gvt: Step,
     committed: Step,
+    limit: Step,
     end: Step,
     gvt_advances: u64,
 }
@@ -171,6 +175,8 @@ impl<M: CellModel> VirtualRun<M> {
             })
             .collect();
         let mut run = VirtualRun {
+            config: config.clone(),
+            inputs: 0,
             grid,
             partition,
             worlds: Vec::new(),
@@ -182,6 +188,7 @@ impl<M: CellModel> VirtualRun<M> {
             turn: 0,
             gvt: 1,
             committed: 0,
+            limit: 0,
             end: 0,
             gvt_advances: 0,
         };
@@ -210,6 +217,63 @@ impl<M: CellModel> VirtualRun<M> {
         for m in msgs {
             *self.in_flight.entry(m.affects()).or_default() += 1;
             self.pool.push(m);
+        }
+    }
+
+    /// Schedules an external input at step `step`: it is broadcast to every world as an input
+    /// message (in the optimistic modes through the in-flight pool, so it may arrive late and
+    /// cause rollbacks; in conservative mode straight into the inboxes).
+    ///
+    /// # Panics
+    /// If `step` is 0 or below GVT (optimistic modes) or not beyond every state already made
+    /// known (conservative mode: [`World::frontier`]), or if an added entity lies outside the
+    /// grid.
+    pub fn add_input(&mut self, step: Step, input: Input<M::State>) {
+        let conservative = self.config.mode == RollbackMode::Conservative;
+        let floor = if conservative {
+            1 + self.worlds.iter().map(|w| w.frontier()).max().unwrap_or(0)
+        } else {
+            self.gvt
+        };
+        assert!(
+            step >= 1 && step >= floor,
+            "input at step {step} is too late (must be at least {floor})"
+        );
+        let (removes, adds) = match input {
+            Input::Spawn(s) => (Vec::new(), vec![s]),
+            Input::Remove(id) => (vec![id], Vec::new()),
+            Input::Replace(s) => (vec![M::id(&s)], vec![s]),
+        };
+        let bodies: Vec<(u32, M::State)> = adds
+            .into_iter()
+            .map(|s| {
+                let c = self
+                    .grid
+                    .cell_of(M::position(&s))
+                    .unwrap_or_else(|| panic!("input entity {} outside the grid", M::id(&s)));
+                (self.grid.index(c) as u32, s)
+            })
+            .collect();
+        self.inputs += 1;
+        let msgs: Vec<Message<M::State>> = (0..self.worlds.len() as WorldId)
+            .map(|w| Message {
+                step,
+                kind: MessageKind::Input,
+                sign: Sign::Positive,
+                src_world: WorldId::MAX,
+                dst_world: w,
+                src_cell: u32::MAX,
+                seq: self.inputs,
+                bodies: bodies.clone(),
+                removes: removes.clone(),
+            })
+            .collect();
+        if conservative {
+            for m in msgs {
+                self.worlds[m.dst_world as usize].receive(m);
+            }
+        } else {
+            self.post(msgs);
         }
     }
 
@@ -270,17 +334,18 @@ impl<M: CellModel> VirtualRun<M> {
         }
     }
 
-    /// Runs until `steps` more steps are committed, returning their frames in step order.
+    /// Runs until exactly `steps` more steps are committed, returning their frames in step order.
     pub fn run(&mut self, steps: u64) -> Vec<Frame> {
         let mut frames = Vec::new();
         self.run_with(steps, |f| frames.push(f));
         frames
     }
 
-    /// Runs until `steps` more steps are committed, handing each committed frame to `sink`
+    /// Runs until exactly `steps` more steps are committed, handing each committed frame to `sink`
     /// in step order.
     pub fn run_with(&mut self, steps: u64, mut sink: impl FnMut(Frame)) {
         let target = self.committed + steps;
+        self.limit = target;
         self.end = self.end.max(target);
         for w in &mut self.worlds {
             w.set_end(target);
@@ -335,12 +400,13 @@ impl<M: CellModel> VirtualRun<M> {
         .unwrap_or(self.end + 1)
         .min(self.end + 1);
         debug_assert!(new >= self.gvt, "GVT went back from {} to {new}", self.gvt);
-        if new <= self.gvt {
+        if new > self.gvt {
+            self.gvt = new;
+            self.gvt_advances += 1;
+        } else if self.committed + 1 >= self.gvt || self.committed >= self.limit {
             return;
         }
-        self.gvt = new;
-        self.gvt_advances += 1;
-        while self.committed + 1 < new {
+        while self.committed + 1 < new && self.committed < self.limit {
             let t = self.committed + 1;
             let frame = self.frame(t);
             for w in &mut self.worlds {
@@ -351,7 +417,7 @@ impl<M: CellModel> VirtualRun<M> {
         }
         for w in &mut self.worlds {
             w.sample_log_bytes();
-            w.fossil_collect(new - 1);
+            w.fossil_collect((new - 1).min(self.committed));
         }
     }
 

@@ -9,11 +9,14 @@
 //! SPEC-kernel.md §Inputs).
 
 use super::partition::WorldId;
-use crate::model::Step;
+use crate::model::{BodyId, Step};
 
-/// What a message is about.
+/// What a message is about. Inputs sort first so that, at a given step, a world has applied
+/// them before anything can make a state of that step known (conservative mode).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum MessageKind {
+    /// An external input changing the states at `step` (spawn, remove, replace).
+    Input,
     /// The state of a border cell at `step`.
     Ghost,
     /// Bodies arriving at `step` in the destination world's cells.
@@ -53,8 +56,22 @@ pub struct Message<S> {
     /// Sequence number of this version of the (kind, step, src cell, dst world) content.
     pub seq: u32,
     /// `(home cell at step, state)` pairs sorted by (cell, id); empty for anti-messages and
-    /// null messages.
+    /// null messages. For an input: the states it adds.
     pub bodies: Vec<(u32, S)>,
+    /// For an input: the ids of the bodies it removes (empty otherwise).
+    pub removes: Vec<BodyId>,
+}
+
+/// An external event at a step, applied to the states at that step (before they are used).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Input<S> {
+    /// Adds an entity (its id must not be in use).
+    Spawn(S),
+    /// Removes the entity with this id, wherever it is.
+    Remove(BodyId),
+    /// Replaces the state of the entity with the same id (e.g. to set its velocity or apply
+    /// an impulse); it is re-homed by its new position.
+    Replace(S),
 }
 
 impl<S> Message<S> {
@@ -70,7 +87,7 @@ impl<S> Message<S> {
     pub fn affects(&self) -> Step {
         match self.kind {
             MessageKind::Ghost => self.step + 1,
-            MessageKind::Migrate => self.step,
+            MessageKind::Migrate | MessageKind::Input => self.step,
         }
     }
 

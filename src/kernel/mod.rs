@@ -26,6 +26,6 @@ pub mod world;
 
 pub use config::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
 pub use counters::{Counters, WorldCounters};
-pub use message::{Message, MessageKey, MessageKind, Sign};
+pub use message::{Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
 pub use world::World;

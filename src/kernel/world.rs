@@ -25,7 +25,7 @@ use super::partition::{Partition, WorldId};
 use crate::frame::{Event, EventKind};
 use crate::grid::Grid;
 use crate::hash::StateHash;
-use crate::model::{CellModel, Neighbourhood, Step};
+use crate::model::{BodyId, CellModel, Neighbourhood, Step};
 use crate::state::CellStates;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
@@ -102,7 +102,11 @@ struct Slot<S> {
     migrate_known: BTreeSet<u32>,
     recv: BTreeMap<(MessageKind, u32), Recv<S>>,
     sent: BTreeMap<(MessageKind, u32, WorldId), Sent<S>>,
+    inputs: BTreeMap<u32, InputEntry<S>>,
 }
+
+/// An input applied to a slot: the ids it removes and the (home cell, state) it adds.
+type InputEntry<S> = (Vec<BodyId>, Vec<(u32, S)>);
 
 impl<S: Clone> Slot<S> {
     fn new(n: usize) -> Self {
@@ -116,6 +120,7 @@ impl<S: Clone> Slot<S> {
             migrate_known: BTreeSet::new(),
             recv: BTreeMap::new(),
             sent: BTreeMap::new(),
+            inputs: BTreeMap::new(),
         }
     }
 
@@ -290,6 +295,16 @@ impl<M: CellModel> World<M> {
         } else {
             let d = self.dirty.keys().next().copied().unwrap_or(Step::MAX);
             self.head.min(d)
+        }
+    }
+
+    /// The highest step any of its states may have reached: its head (optimistic modes), or
+    /// the largest next step of its cells (conservative; no state beyond it is known yet).
+    pub fn frontier(&self) -> Step {
+        if self.mode == RollbackMode::Conservative {
+            self.next.iter().copied().max().unwrap_or(0)
+        } else {
+            self.head
         }
     }
 
@@ -546,6 +561,7 @@ impl<M: CellModel> World<M> {
             src_cell: cell,
             seq,
             bodies,
+            removes: Vec::new(),
         };
         if let Some(old) = entry.live.take() {
             let lone = old.is_empty() || content.is_empty();
@@ -566,6 +582,7 @@ impl<M: CellModel> World<M> {
             match kind {
                 MessageKind::Ghost => self.counters.ghosts_sent += 1,
                 MessageKind::Migrate => self.counters.migrates_sent += 1,
+                MessageKind::Input => {}
             }
         }
     }
@@ -622,6 +639,17 @@ impl<M: CellModel> World<M> {
         }
         for (_, bs) in cur.foreign_in.range((d, 0)..=(d, u32::MAX)) {
             v.extend(bs.iter().cloned());
+        }
+        if !cur.inputs.is_empty() {
+            let removed: BTreeSet<BodyId> = cur
+                .inputs
+                .values()
+                .flat_map(|i| i.0.iter().copied())
+                .collect();
+            v.retain(|b| !removed.contains(&M::id(b)));
+            for (_, adds) in cur.inputs.values() {
+                v.extend(adds.iter().filter(|p| p.0 == d).map(|p| p.1.clone()));
+            }
         }
         v.sort_by_key(|b| M::id(b));
         let ld = part.local(d) as usize;
@@ -701,6 +729,9 @@ impl<M: CellModel> World<M> {
         let i = self.si(step);
         let src = msg.src_cell;
         let kind = msg.kind;
+        if kind == MessageKind::Input {
+            return self.apply_input(msg, out);
+        }
         let r = self.slots[i].recv.entry((kind, src)).or_default();
         let before = r.effective().map(|e| e.0);
         let old_cells: Vec<u32> = r
@@ -731,6 +762,7 @@ impl<M: CellModel> World<M> {
         }
         let new: Vec<(u32, M::State)> = r.effective().map(|e| e.1.clone()).unwrap_or_default();
         match kind {
+            MessageKind::Input => unreachable!("inputs are applied by apply_input"),
             MessageKind::Ghost => {
                 let slot = &mut self.slots[i];
                 if new.is_empty() {
@@ -783,6 +815,43 @@ impl<M: CellModel> World<M> {
                 dirtied.then_some(step)
             }
         }
+    }
+
+    /// Applies an input (optimistic modes): stored in its step's slot; if that step's states
+    /// exist, the own cells holding a removed entity or receiving an added one are rebuilt.
+    fn apply_input(
+        &mut self,
+        msg: Message<M::State>,
+        out: &mut Vec<Message<M::State>>,
+    ) -> Option<Step> {
+        let step = msg.step;
+        assert!(step >= 1, "inputs apply to steps from 1 on");
+        let i = self.si(step);
+        let mut cells: BTreeSet<u32> = msg
+            .bodies
+            .iter()
+            .map(|p| p.0)
+            .filter(|&c| self.is_own(c))
+            .collect();
+        if step <= self.head {
+            for (x, st) in self.slots[i].states.iter().enumerate() {
+                if st.iter().any(|b| msg.removes.contains(&M::id(b))) {
+                    cells.insert(self.cells[x]);
+                }
+            }
+        }
+        self.slots[i]
+            .inputs
+            .insert(msg.seq, (msg.removes, msg.bodies));
+        let mut dirtied = false;
+        if step <= self.head {
+            for d in cells {
+                if self.rebuild_state(d, step) {
+                    dirtied |= self.on_state_change(d, step, out);
+                }
+            }
+        }
+        dirtied.then_some(step)
     }
 
     /// Re-executes the dirty cells of step `s` (optimistic modes).
@@ -851,6 +920,15 @@ impl<M: CellModel> World<M> {
             self.slots[i].outs[x] = Some(o);
         }
         dsts.extend(self.slots[i + 1].foreign_in.keys().map(|k| k.0));
+        let part = &*self.part;
+        let id = self.id;
+        dsts.extend(
+            self.slots[i + 1]
+                .inputs
+                .values()
+                .flat_map(|x| x.1.iter().map(|p| p.0))
+                .filter(|&c| part.owner(c) == id),
+        );
         for d in dsts {
             self.rebuild_state(d, h + 1);
         }
@@ -878,6 +956,11 @@ impl<M: CellModel> World<M> {
             let i = self.si(step);
             let src = msg.src_cell;
             match msg.kind {
+                MessageKind::Input => {
+                    self.slots[i]
+                        .inputs
+                        .insert(msg.seq, (msg.removes, msg.bodies));
+                }
                 MessageKind::Ghost => {
                     let slot = &mut self.slots[i];
                     slot.ghost_known.insert(src);
