@@ -169,6 +169,7 @@ pub struct World<M: CellModel> {
     head: Step,
     end: Step,
     next: Vec<Step>,
+    next_min: Step,
     slots: VecDeque<Slot<M::State>>,
     dirty: BTreeMap<Step, BTreeSet<u32>>,
     inbox: BTreeMap<MessageKey, Message<M::State>>,
@@ -233,6 +234,7 @@ impl<M: CellModel> World<M> {
             head: 0,
             end: 0,
             next: vec![0; n],
+            next_min: if n == 0 { Step::MAX } else { 0 },
             slots: VecDeque::from([slot]),
             dirty: BTreeMap::new(),
             inbox: BTreeMap::new(),
@@ -291,7 +293,7 @@ impl<M: CellModel> World<M> {
     /// the smallest next step over its cells (conservative).
     pub fn lvt(&self) -> Step {
         if self.mode == RollbackMode::Conservative {
-            self.next.iter().copied().min().unwrap_or(self.end)
+            self.next_min
         } else {
             let d = self.dirty.keys().next().copied().unwrap_or(Step::MAX);
             self.head.min(d)
@@ -311,13 +313,33 @@ impl<M: CellModel> World<M> {
     /// Its GVT bound (see [`crate::kernel::gvt`]): `lvt() + 1` and the `affects` step of every
     /// unprocessed message.
     pub fn bound(&self) -> Step {
-        let inbox = self
-            .inbox
-            .values()
-            .map(|m| m.affects())
-            .min()
-            .unwrap_or(Step::MAX);
-        (self.lvt() + 1).min(inbox)
+        // The smallest `affects` in the inbox: its first key has the smallest step `s`; a
+        // ghost of `s` affects `s + 1`, anything else of `s` affects `s`.
+        let inbox = match self.inbox.keys().next() {
+            None => Step::MAX,
+            Some(&(s, kind, ..)) => {
+                let non_ghost = kind == MessageKind::Input
+                    || self
+                        .inbox
+                        .range((s, MessageKind::Migrate, 0, 0, Sign::Anti)..)
+                        .next()
+                        .is_some_and(|(k, _)| k.0 == s);
+                if non_ghost {
+                    s
+                } else {
+                    s + 1
+                }
+            }
+        };
+        debug_assert_eq!(
+            inbox,
+            self.inbox
+                .values()
+                .map(|m| m.affects())
+                .min()
+                .unwrap_or(Step::MAX)
+        );
+        self.lvt().saturating_add(1).min(inbox)
     }
 
     /// Puts a message in the inbox. It is applied at the next [`World::act`], in the total
@@ -992,8 +1014,9 @@ impl<M: CellModel> World<M> {
         for x in 0..self.cells.len() {
             progressed |= self.try_compute(x, gvt, out);
         }
+        self.next_min = self.next.iter().copied().min().unwrap_or(Step::MAX);
         let lvt = self.lvt();
-        self.counters.steps_computed += lvt - lvt_before;
+        self.counters.steps_computed += lvt.min(self.end) - lvt_before.min(self.end);
         if !progressed {
             self.counters.idle_acts += 1;
         }
