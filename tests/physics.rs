@@ -169,7 +169,6 @@ fn same_scene_twice_gives_the_same_hash_sequence() {
 
 /// Issue 2's settling bar for 1,000 falling cubes after 10 simulated seconds.
 #[test]
-#[ignore = "known failure: the landing cascade flings 1 of 1,000 cubes out of the domain (physics-quality issue 3); run with --ignored"]
 fn falling_cubes_1000_settle_within_ten_seconds() {
     let scene = soda::scene::builtin::builtin("falling-cubes", Some(1000), 0).unwrap();
     let mut sim = Simulation::new(scene);

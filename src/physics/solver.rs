@@ -120,17 +120,22 @@ pub(crate) fn solve_body(
             (xp, qp)
         };
         // The velocity a correction adds may cancel the approach but not fling the body:
-        // capped at the predicted speed plus the separation allowance (and the same, over
-        // the bounding radius, for spin).
+        // along its own direction it is capped at the predicted velocity it opposes plus the
+        // separation allowance, so a correction never turns a fall into sideways or upward
+        // speed (spin: the predicted speed plus the allowance, over the bounding radius).
         let v_pred = b.linvel;
         let w_pred = b.angvel;
         let mut dv = (x1 - xp) / h;
-        let dv_cap = v_pred.norm() + p.max_separation_speed;
-        if dv.norm() > dv_cap {
-            dv *= dv_cap / dv.norm();
+        let dv_len = dv.norm();
+        if dv_len > 0.0 {
+            let dv_cap = (-v_pred.dot(&dv) / dv_len).max(0.0) + p.max_separation_speed;
+            if dv_len > dv_cap {
+                dv *= dv_cap / dv_len;
+            }
         }
+        let speed_cap = v_pred.norm() + p.max_separation_speed;
         let mut dw = angular_velocity(&qp, &q1, h);
-        let dw_cap = w_pred.norm() + dv_cap / body.shape.bounding_radius();
+        let dw_cap = w_pred.norm() + speed_cap / body.shape.bounding_radius();
         if dw.norm() > dw_cap {
             dw *= dw_cap / dw.norm();
         }
