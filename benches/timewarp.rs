@@ -19,7 +19,8 @@
 //! 3. `cargo bench --bench timewarp -- --test` (or `cargo test --benches`) runs a tiny
 //! version. Every run checks its final hash against the reference.
 //!
-//! Run: `cargo bench --bench timewarp`.
+//! Run: `cargo bench --bench timewarp` (`TW_PARTS=overhead,granularity,memory,flatness`
+//! selects parts).
 
 use soda::exec::virtual_exec::VirtualRun;
 use soda::hash::hex;
@@ -218,8 +219,19 @@ fn log_flatness() {
 }
 
 fn main() {
-    overhead();
-    granularity();
-    log_memory();
-    log_flatness();
+    // `TW_PARTS=overhead,granularity,memory,flatness` (default: all) selects the parts.
+    let parts = std::env::var("TW_PARTS").unwrap_or_default();
+    let on = |p: &str| parts.is_empty() || parts.split(',').any(|x| x == p);
+    if on("overhead") {
+        overhead();
+    }
+    if on("granularity") {
+        granularity();
+    }
+    if on("memory") {
+        log_memory();
+    }
+    if on("flatness") {
+        log_flatness();
+    }
 }
