@@ -8,9 +8,11 @@
 
 mod kernel_support;
 
-use kernel_support::{case, particle_scene, property, rigid_scene, Case};
+use kernel_support::{case, particle_scene, property, property_with, rigid_scene, Case};
 use proptest::prelude::*;
+use proptest::test_runner::TestError;
 use proptest::test_runner::{Config, TestRunner};
+use soda::exec::virtual_exec::parse_schedule;
 use soda::kernel::PlantedBug;
 
 proptest! {
@@ -45,7 +47,24 @@ fn planted_bug_fails(bug: PlantedBug) -> bool {
     let r = runner.run(&case(particle_scene(), 5..40), |c: Case| {
         property(&c, bug).map(|_| ()).map_err(TestCaseError::fail)
     });
-    r.is_err()
+    match r {
+        Ok(()) => false,
+        Err(TestError::Fail(reason, case)) => {
+            // The failure names the divergent step and carries a replay string that
+            // reproduces it.
+            let msg = reason.message().to_string();
+            assert!(msg.contains("first divergence at step"), "{msg}");
+            let replay = msg.split("): ").last().unwrap().trim();
+            let schedule = parse_schedule(replay).expect("a replay string");
+            let mut replayed = case.clone();
+            let cfg = case.config(bug).schedule(schedule);
+            replayed.schedule_seed = 0;
+            let again = property_with(&replayed, &cfg);
+            assert!(again.is_err(), "the printed schedule replays the failure");
+            true
+        }
+        Err(e) => panic!("{e}"),
+    }
 }
 
 #[test]

@@ -184,7 +184,12 @@ pub fn property(case: &Case, bug: PlantedBug) -> Result<Counters, String> {
 }
 
 fn property_inner(case: &Case, bug: PlantedBug) -> Result<Counters, String> {
-    let config = case.config(bug);
+    property_with(case, &case.config(bug))
+}
+
+/// The equivalence property for `case`'s scene and steps under an explicit configuration.
+pub fn property_with(case: &Case, config: &KernelConfig) -> Result<Counters, String> {
+    let config = config.clone();
     match case.scene {
         SceneCase::Particles(n, dims, open, seed) => {
             let (m, g, b): (Particles, Grid, Vec<Particle>) = Particles::scene(n, dims, open, seed);
