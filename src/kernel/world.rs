@@ -989,6 +989,18 @@ impl<M: CellModel> World<M> {
                     if !msg.bodies.is_empty() {
                         slot.ghosts
                             .insert(src, msg.bodies.into_iter().map(|p| p.1).collect());
+                    } else {
+                        // An empty cell at `step` migrates nothing at `step + 1`.
+                        self.ensure_slot(step + 1);
+                        let j = self.si(step + 1);
+                        self.slots[j].migrate_known.insert(src);
+                        let grid = self.grid.clone();
+                        for n in grid.neighbours(grid.coord(src as usize)) {
+                            let ni = grid.index(n) as u32;
+                            if self.is_own(ni) {
+                                self.try_know(ni, step + 1, out);
+                            }
+                        }
                     }
                 }
                 MessageKind::Migrate => {
@@ -1061,9 +1073,13 @@ impl<M: CellModel> World<M> {
         self.ensure_slot(s + 1);
         self.slots[i].outs[x] = Some(o);
         self.next[x] = s + 1;
-        for k in 0..self.targets[x].len() {
-            let w = self.targets[x][k];
-            self.send_migrate(x, s, w, out);
+        // An empty cell produces nothing, and its (null) ghost of `s` already told every
+        // neighbouring world so: no null migration is needed.
+        if occupied {
+            for k in 0..self.targets[x].len() {
+                let w = self.targets[x][k];
+                self.send_migrate(x, s, w, out);
+            }
         }
         let grid = self.grid.clone();
         for n in grid.neighbours(grid.coord(cell as usize)) {
