@@ -166,6 +166,9 @@ pub fn case(
 }
 
 /// The equivalence property: every committed frame equals the reference's.
+///
+/// With `KERNEL_TRACE` set, prints every case with its wall time, cell computations and
+/// scheduler decisions (to find slow or stuck cases).
 pub fn property(case: &Case, bug: PlantedBug) -> Result<Counters, String> {
     let t0 = std::time::Instant::now();
     if std::env::var("KERNEL_TRACE").is_ok() {
