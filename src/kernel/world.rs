@@ -170,6 +170,7 @@ pub struct World<M: CellModel> {
     end: Step,
     next: Vec<Step>,
     next_min: Step,
+    idle_at: Option<Step>,
     slots: VecDeque<Slot<M::State>>,
     dirty: BTreeMap<Step, BTreeSet<u32>>,
     inbox: BTreeMap<MessageKey, Message<M::State>>,
@@ -235,6 +236,7 @@ impl<M: CellModel> World<M> {
             end: 0,
             next: vec![0; n],
             next_min: if n == 0 { Step::MAX } else { 0 },
+            idle_at: None,
             slots: VecDeque::from([slot]),
             dirty: BTreeMap::new(),
             inbox: BTreeMap::new(),
@@ -346,6 +348,7 @@ impl<M: CellModel> World<M> {
     /// order of [`MessageKey`].
     pub fn receive(&mut self, msg: Message<M::State>) {
         debug_assert_eq!(msg.dst_world, self.id);
+        self.idle_at = None;
         let prev = self.inbox.insert(msg.key(), msg);
         debug_assert!(prev.is_none(), "duplicate message");
     }
@@ -355,15 +358,18 @@ impl<M: CellModel> World<M> {
         !self.inbox.is_empty()
     }
 
-    /// Whether acting now may do something (it may still find nothing to do in
-    /// conservative mode, where cells wait for their neighbours).
+    /// Whether acting now may do something. In conservative mode an action may still find
+    /// every cell waiting for its neighbours; after such an idle action the world does not
+    /// want to act again until it receives a message or GVT changes.
     pub fn wants_to_act(&self, gvt: Step) -> bool {
         if !self.inbox.is_empty() {
             return true;
         }
         let lvt = self.lvt();
         if self.mode == RollbackMode::Conservative {
-            lvt < self.end && lvt + 1 < gvt + self.window
+            // After an action that could not compute anything, only news (a message) or a
+            // wider window (a new GVT) can unblock a cell.
+            self.idle_at != Some(gvt) && lvt < self.end && lvt + 1 < gvt + self.window
         } else {
             !self.dirty.is_empty() || (self.head < self.end && self.head + 1 < gvt + self.window)
         }
@@ -1031,6 +1037,9 @@ impl<M: CellModel> World<M> {
         self.counters.steps_computed += lvt.min(self.end) - lvt_before.min(self.end);
         if !progressed {
             self.counters.idle_acts += 1;
+            self.idle_at = Some(gvt);
+        } else {
+            self.idle_at = None;
         }
     }
 
