@@ -2,4 +2,6 @@
 //! frames; the reference is the oracle.
 
 pub mod reference;
+pub mod sync;
+pub mod threaded;
 pub mod virtual_exec;

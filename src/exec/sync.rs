@@ -1,0 +1,117 @@
+//! The synchronisation facade of the threaded executor: every lock, atomic, thread spawn and
+//! yield it performs goes through a [`Facade`], so tests can run the executor's own
+//! coordination under shuttle's schedulers (a test crate implements [`Facade`] with
+//! shuttle's primitives). [`StdFacade`] is the production implementation.
+//! crossbeam-deque's operations stay opaque: to a model checker each is one atomic step.
+
+use std::ops::DerefMut;
+
+/// A mutual-exclusion lock.
+pub trait FacadeMutex<T>: Send + Sync {
+    /// The guard type.
+    type Guard<'a>: DerefMut<Target = T>
+    where
+        Self: 'a;
+    /// A new lock holding `v`.
+    fn new(v: T) -> Self;
+    /// Locks, ignoring poisoning (a panicking world ends the run anyway).
+    fn lock(&self) -> Self::Guard<'_>;
+}
+
+/// An atomic `u64` (all operations sequentially consistent).
+pub trait FacadeAtomic: Send + Sync {
+    /// A new atomic.
+    fn new(v: u64) -> Self;
+    /// Reads.
+    fn load(&self) -> u64;
+    /// Writes.
+    fn store(&self, v: u64);
+    /// Swaps, returning the old value.
+    fn swap(&self, v: u64) -> u64;
+    /// Adds, returning the old value.
+    fn fetch_add(&self, v: u64) -> u64;
+}
+
+/// The primitives the threaded executor is written against.
+pub trait Facade: Send + Sync + 'static {
+    /// Lock type.
+    type Mutex<T: Send + 'static>: FacadeMutex<T>;
+    /// Atomic type.
+    type Atomic: FacadeAtomic;
+    /// Join handle of a spawned thread.
+    type Handle: Send;
+    /// Starts a thread.
+    fn spawn(f: impl FnOnce() + Send + 'static) -> Self::Handle;
+    /// Waits for a thread; `Err` if it panicked.
+    fn join(h: Self::Handle) -> Result<(), String>;
+    /// Gives the processor to another thread; `spins` counts consecutive idle calls so an
+    /// implementation may back off.
+    fn pause(spins: u32);
+}
+
+/// The standard library's primitives.
+pub struct StdFacade;
+
+impl<T: Send> FacadeMutex<T> for std::sync::Mutex<T> {
+    type Guard<'a>
+        = std::sync::MutexGuard<'a, T>
+    where
+        T: 'a;
+    fn new(v: T) -> Self {
+        std::sync::Mutex::new(v)
+    }
+    fn lock(&self) -> Self::Guard<'_> {
+        std::sync::Mutex::lock(self).unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl FacadeAtomic for std::sync::atomic::AtomicU64 {
+    fn new(v: u64) -> Self {
+        std::sync::atomic::AtomicU64::new(v)
+    }
+    fn load(&self) -> u64 {
+        self.load(std::sync::atomic::Ordering::SeqCst)
+    }
+    fn store(&self, v: u64) {
+        self.store(v, std::sync::atomic::Ordering::SeqCst)
+    }
+    fn swap(&self, v: u64) -> u64 {
+        self.swap(v, std::sync::atomic::Ordering::SeqCst)
+    }
+    fn fetch_add(&self, v: u64) -> u64 {
+        self.fetch_add(v, std::sync::atomic::Ordering::SeqCst)
+    }
+}
+
+impl Facade for StdFacade {
+    type Mutex<T: Send + 'static> = std::sync::Mutex<T>;
+    type Atomic = std::sync::atomic::AtomicU64;
+    type Handle = std::thread::JoinHandle<()>;
+
+    fn spawn(f: impl FnOnce() + Send + 'static) -> Self::Handle {
+        std::thread::spawn(f)
+    }
+
+    fn join(h: Self::Handle) -> Result<(), String> {
+        h.join().map_err(|e| panic_message(&*e))
+    }
+
+    fn pause(spins: u32) {
+        if spins < 64 {
+            std::thread::yield_now();
+        } else {
+            std::thread::sleep(std::time::Duration::from_micros(50));
+        }
+    }
+}
+
+/// The text of a panic payload.
+pub fn panic_message(e: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = e.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = e.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "non-string panic payload".to_string()
+    }
+}

@@ -1,0 +1,174 @@
+//! The threaded executor commits exactly the reference's frames, whatever the thread count,
+//! world count, partition and rollback mode, and fails cleanly when a world panics.
+
+use soda::exec::reference::ReferenceRun;
+use soda::exec::threaded::{run_threaded, ExecError};
+use soda::frame::Event;
+use soda::grid::Grid;
+use soda::hash::StateHash;
+use soda::kernel::{KernelConfig, PartitionKind, RollbackMode};
+use soda::model::{BodyId, CellModel, Neighbourhood, Step};
+use soda::scene::builtin::{builtin, BUILTINS};
+
+fn small(name: &str) -> usize {
+    match name {
+        "chain" => 12,
+        "dense-pile" => 32,
+        _ => 27,
+    }
+}
+
+fn reference_hashes(scene: &soda::Scene, steps: u64) -> Vec<u64> {
+    let (mut run, _) = ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
+    (0..steps).map(|_| run.advance().hash).collect()
+}
+
+#[test]
+fn threaded_run_matches_reference_bitwise_for_every_builtin_thread_count_world_count_and_mode() {
+    let steps = 40;
+    for b in BUILTINS {
+        let scene = builtin(b.name, Some(small(b.name)), 1).unwrap();
+        let expected = reference_hashes(&scene, steps);
+        for (k, &threads) in [1usize, 2, 4].iter().enumerate() {
+            for (j, &worlds) in [1usize, 3, 8, 16].iter().enumerate() {
+                let mode = [
+                    RollbackMode::Cell,
+                    RollbackMode::World,
+                    RollbackMode::Conservative,
+                ][(k + j + b.name.len()) % 3];
+                let partition = if (k + j) % 2 == 0 {
+                    PartitionKind::Blocks
+                } else {
+                    PartitionKind::KMeans
+                };
+                let config = KernelConfig::new(worlds)
+                    .mode(mode)
+                    .window(1 + (j as u64 * 7) % 20)
+                    .partition(partition.clone());
+                let report = run_threaded(
+                    scene.model(),
+                    scene.grid(),
+                    scene.initial_bodies(),
+                    &config,
+                    threads,
+                    steps,
+                )
+                .unwrap_or_else(|e| panic!("{}: {e}", b.name));
+                let got: Vec<u64> = report.frames.iter().map(|f| f.hash).collect();
+                assert_eq!(
+                    got, expected,
+                    "{} threads={threads} worlds={worlds} mode={mode:?} partition={partition:?}",
+                    b.name
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn repeated_threaded_runs_in_every_mode_match_the_reference() {
+    let scene = builtin("sparse-gas", Some(64), 5).unwrap();
+    let expected = reference_hashes(&scene, 60);
+    for mode in [
+        RollbackMode::Cell,
+        RollbackMode::World,
+        RollbackMode::Conservative,
+    ] {
+        for _ in 0..3 {
+            let config = KernelConfig::new(8)
+                .mode(mode)
+                .window(16)
+                .partition(PartitionKind::Random);
+            let report = run_threaded(
+                scene.model(),
+                scene.grid(),
+                scene.initial_bodies(),
+                &config,
+                2,
+                60,
+            )
+            .unwrap();
+            assert_eq!(
+                report.frames.iter().map(|f| f.hash).collect::<Vec<_>>(),
+                expected,
+                "mode {mode:?}"
+            );
+            let c = &report.counters.total;
+            assert!(report.frames.len() == 60);
+            if mode == RollbackMode::Conservative {
+                assert_eq!(c.steps_rolled_back, 0, "conservative rolled back");
+            }
+        }
+    }
+}
+
+/// A synthetic model whose step panics at a chosen step (the test-only hook).
+#[derive(Clone)]
+struct PanicAt {
+    step: Step,
+}
+
+impl CellModel for PanicAt {
+    type State = (BodyId, [f32; 3]);
+    fn id(s: &Self::State) -> BodyId {
+        s.0
+    }
+    fn position(s: &Self::State) -> [f32; 3] {
+        s.1
+    }
+    fn step_cell(
+        &self,
+        step: Step,
+        _grid: &Grid,
+        nb: &Neighbourhood<'_, Self::State>,
+        out: &mut Vec<Self::State>,
+        _events: &mut Vec<Event>,
+    ) {
+        if step == self.step {
+            panic!("planted panic at step {step}");
+        }
+        out.extend(nb.own().iter().copied());
+    }
+    fn hash_state(s: &Self::State, h: &mut StateHash) {
+        for c in s.1 {
+            h.f32(c);
+        }
+    }
+}
+
+#[test]
+fn a_panicking_world_ends_the_run_with_an_error_naming_world_and_step() {
+    let grid = Grid::covering(
+        soda::math::Vec3::zeros(),
+        soda::math::Vec3::new(8.0, 8.0, 8.0),
+        1.0,
+    );
+    let bodies: Vec<(BodyId, [f32; 3])> = (0..64)
+        .map(|i| (i, [0.5 + (i % 8) as f32, 0.5 + (i / 8) as f32, 0.5]))
+        .collect();
+    for threads in [1, 2, 4] {
+        let config = KernelConfig::new(4).window(8);
+        let err = run_threaded(
+            PanicAt { step: 5 },
+            grid.clone(),
+            bodies.clone(),
+            &config,
+            threads,
+            20,
+        )
+        .unwrap_err();
+        match &err {
+            ExecError::WorldPanicked {
+                step,
+                message,
+                world,
+            } => {
+                assert!(*world < 4);
+                assert_eq!(*step, 5, "{err}");
+                assert!(message.contains("planted panic"), "{err}");
+            }
+            other => panic!("unexpected error {other}"),
+        }
+        assert!(err.to_string().contains("world"));
+    }
+}
