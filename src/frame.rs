@@ -38,3 +38,42 @@ pub struct Frame {
     /// Events raised computing `step - 1` → `step`.
     pub events: Vec<Event>,
 }
+
+/// Which committed steps a frame sink wants the full states of; every other step reaches
+/// the sink as a [`Frame`] only (hash, body count, events), which costs nothing extra.
+/// Executors clone states only for the steps asked for.
+#[derive(Clone, Debug, Default)]
+pub struct StatesWanted {
+    /// Every step that is a multiple of this (0: none).
+    pub every: u64,
+    /// This one step (typically the last).
+    pub step: Option<Step>,
+    /// Every step whose hash differs from `expected[step - 1]` (a verifier's cheap way to
+    /// capture exactly the first divergent state, even from a non-reproducible run).
+    pub unexpected: Option<std::sync::Arc<Vec<u64>>>,
+}
+
+impl StatesWanted {
+    /// No states at all.
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// The states of step `step` only.
+    pub fn at(step: Step) -> Self {
+        StatesWanted {
+            step: Some(step),
+            ..Self::default()
+        }
+    }
+
+    /// Whether step `step`, whose canonical hash is `hash`, is wanted.
+    pub fn wants(&self, step: Step, hash: u64) -> bool {
+        (self.every > 0 && step % self.every == 0)
+            || self.step == Some(step)
+            || self
+                .unexpected
+                .as_ref()
+                .is_some_and(|e| step >= 1 && e.get(step as usize - 1).is_some_and(|&h| h != hash))
+    }
+}

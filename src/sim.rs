@@ -1,9 +1,15 @@
-//! The user-facing simulation: a scene run by an executor, with physics measurements of
-//! the state (energy, speed, exact penetration) for summaries.
+//! The user-facing simulation: a scene run by an executor (reference, virtual or threaded,
+//! [`run_scene`]), with physics measurements of the state (energy, speed, exact
+//! penetration) for summaries.
 
 use crate::exec::reference::ReferenceRun;
-use crate::frame::{Event, Frame};
+use crate::exec::sync::StdFacade;
+use crate::exec::threaded::{run_threaded_with, ExecError, ThreadTimes};
+use crate::exec::virtual_exec::VirtualRun;
+use crate::frame::{Event, EventKind, Frame, StatesWanted};
+use crate::grid::Grid;
 use crate::hash::hex;
+use crate::kernel::{Counters, KernelConfig};
 use crate::physics::metrics::{
     environment_penetration, kinetic_energy, max_speed, pair_penetration, potential_energy,
 };
@@ -37,11 +43,18 @@ pub struct StateReport {
     pub max_height: f32,
 }
 
-/// Measures a state.
+/// Measures the current state of a reference run.
 pub fn measure(run: &ReferenceRun<RigidBodyModel>) -> StateReport {
-    let state = run.state();
-    let grid = run.grid();
-    let model = run.model();
+    measure_state(run.step_number(), run.state(), run.grid(), run.model())
+}
+
+/// Measures the state `state` of step `step`.
+pub fn measure_state(
+    step: u64,
+    state: &CellStates<Body>,
+    grid: &Grid,
+    model: &RigidBodyModel,
+) -> StateReport {
     let sorted: Vec<&Body> = state.sorted::<RigidBodyModel>();
     let mut pen = 0.0f32;
     for b in &sorted {
@@ -56,7 +69,7 @@ pub fn measure(run: &ReferenceRun<RigidBodyModel>) -> StateReport {
         }
     }
     StateReport {
-        step: run.step_number(),
+        step,
         bodies: sorted.len(),
         hash: hex(state.hash::<RigidBodyModel>()),
         kinetic_energy: kinetic_energy(sorted.iter().copied()),
@@ -103,6 +116,232 @@ pub struct RunReport {
     pub left_domain_events: usize,
     /// Measurements of the final state.
     pub last: StateReport,
+    /// The Time Warp side of the run (virtual and threaded executors only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kernel: Option<KernelReport>,
+}
+
+/// Which executor runs a scene (DESIGN.md §5): all three commit the same bits.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExecutorKind {
+    /// One thread, no worlds: the oracle.
+    #[default]
+    Reference,
+    /// One thread runs the worlds under a seeded, replayable schedule.
+    Virtual,
+    /// OS threads run the worlds as tasks on crossbeam-deque work stealing.
+    Threaded,
+}
+
+impl ExecutorKind {
+    /// Parses `reference`, `virtual` or `threaded`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "reference" => Some(Self::Reference),
+            "virtual" => Some(Self::Virtual),
+            "threaded" => Some(Self::Threaded),
+            _ => None,
+        }
+    }
+
+    /// The name [`parse`](Self::parse) accepts.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Reference => "reference",
+            Self::Virtual => "virtual",
+            Self::Threaded => "threaded",
+        }
+    }
+}
+
+/// How to run a scene: the executor, the kernel configuration (ignored by the reference)
+/// and the thread count (threaded executor only).
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// The executor.
+    pub executor: ExecutorKind,
+    /// Worlds, mode, window, partition, schedule.
+    pub kernel: KernelConfig,
+    /// OS threads of the threaded executor (at least 1).
+    pub threads: usize,
+}
+
+/// The kernel's statistics of a virtual or threaded run.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct KernelReport {
+    /// Worlds (logical processes).
+    pub worlds: usize,
+    /// OS threads (1 for the virtual executor).
+    pub threads: usize,
+    /// Rollback mode.
+    pub mode: crate::kernel::RollbackMode,
+    /// Optimism window.
+    pub window: u64,
+    /// Partitioner.
+    pub partition: crate::kernel::PartitionKind,
+    /// The virtual executor's schedule as a replay string (`None` for threaded runs, which
+    /// are not replayable, or when recording was off).
+    pub schedule: Option<String>,
+    /// `cells_committed / cells_computed` over all worlds.
+    pub efficiency: f64,
+    /// Counters per world and in total.
+    pub counters: Counters,
+    /// Busy, GVT and idle time of the threads (threaded executor only).
+    pub thread_times: Option<ThreadTimes>,
+}
+
+/// Runs `scene` for `steps` steps on the executor `options` names, handing every committed
+/// frame, in step order, to `sink`, with the committed states (sorted by id) of the steps
+/// `wanted` asks for. Returns the report, whose `last` measures the final state.
+pub fn run_scene(
+    scene: &Scene,
+    options: &RunOptions,
+    steps: u64,
+    wanted: &StatesWanted,
+    mut sink: impl FnMut(&Frame, Option<&[&Body]>),
+) -> Result<RunReport, ExecError> {
+    let model = scene.model();
+    let grid = scene.grid();
+    let mut want = wanted.clone();
+    let last_step = steps;
+    let mut final_states: Option<Vec<Body>> = None;
+    let mut capped = 0;
+    let mut left = 0;
+    let mut body_steps = 0u64;
+    let mut prev_bodies = scene
+        .bodies
+        .iter()
+        .filter(|b| grid.cell_of(b.position).is_some())
+        .count();
+    let initial_events;
+    let start = Instant::now();
+    let mut on_frame = |f: &Frame, states: Option<&[&Body]>| {
+        for e in &f.events {
+            match e.kind {
+                EventKind::SpeedCapped => capped += 1,
+                EventKind::LeftDomain => left += 1,
+            }
+        }
+        body_steps += prev_bodies as u64;
+        prev_bodies = f.bodies;
+        if f.step == last_step {
+            final_states = states.map(|s| s.iter().map(|b| (*b).clone()).collect());
+        }
+        let user_wants = wanted.wants(f.step, f.hash);
+        sink(f, if user_wants { states } else { None });
+    };
+    let kernel = match options.executor {
+        ExecutorKind::Reference => {
+            let (mut run, events) =
+                ReferenceRun::new(model.clone(), grid.clone(), scene.initial_bodies());
+            initial_events = events;
+            for _ in 0..steps {
+                let f = run.advance();
+                if want.wants(f.step, f.hash) || f.step == last_step {
+                    let sorted = run.state().sorted::<RigidBodyModel>();
+                    on_frame(&f, Some(&sorted));
+                } else {
+                    on_frame(&f, None);
+                }
+            }
+            None
+        }
+        ExecutorKind::Virtual => {
+            want.step = Some(last_step);
+            let (mut run, events) = VirtualRun::new(
+                model.clone(),
+                grid.clone(),
+                scene.initial_bodies(),
+                &options.kernel,
+            );
+            initial_events = events;
+            run.run_with_states(steps, &want, |f, s| on_frame(&f, s));
+            let counters = run.counters();
+            Some(kernel_report(
+                options,
+                1,
+                options
+                    .kernel
+                    .record_schedule
+                    .then(|| run.schedule_string()),
+                counters,
+                None,
+            ))
+        }
+        ExecutorKind::Threaded => {
+            want.step = Some(last_step);
+            let report = run_threaded_with::<RigidBodyModel, StdFacade>(
+                model.clone(),
+                grid.clone(),
+                scene.initial_bodies(),
+                &options.kernel,
+                options.threads.max(1),
+                steps,
+                want,
+                &mut on_frame,
+            )?;
+            initial_events = report.initial_events;
+            Some(kernel_report(
+                options,
+                report.threads,
+                None,
+                report.counters,
+                Some(report.times),
+            ))
+        }
+    };
+    let wall = start.elapsed().as_secs_f64();
+    left += initial_events
+        .iter()
+        .filter(|e| e.kind == EventKind::LeftDomain)
+        .count();
+    let mut ignored = Vec::new();
+    let final_state = match final_states {
+        Some(bodies) => {
+            CellStates::binned::<RigidBodyModel>(&grid, bodies, last_step, &mut ignored)
+        }
+        None => {
+            CellStates::binned::<RigidBodyModel>(&grid, scene.initial_bodies(), 0, &mut ignored)
+        }
+    };
+    let last = measure_state(last_step, &final_state, &grid, &model);
+    Ok(RunReport {
+        scene: scene.name.clone(),
+        executor: options.executor.name().into(),
+        steps,
+        dt: scene.dt,
+        cell_edge: grid.edge,
+        grid: grid.dims,
+        wall_seconds: wall,
+        steps_per_second: steps as f64 / wall.max(1e-9),
+        body_steps_per_second: body_steps as f64 / wall.max(1e-9),
+        hash: last.hash.clone(),
+        speed_capped_events: capped,
+        left_domain_events: left,
+        last,
+        kernel,
+    })
+}
+
+fn kernel_report(
+    options: &RunOptions,
+    threads: usize,
+    schedule: Option<String>,
+    counters: Counters,
+    thread_times: Option<ThreadTimes>,
+) -> KernelReport {
+    KernelReport {
+        worlds: counters.worlds.len(),
+        threads,
+        mode: options.kernel.mode,
+        window: options.kernel.window,
+        partition: options.kernel.partition.clone(),
+        schedule,
+        efficiency: counters.total.efficiency(),
+        counters,
+        thread_times,
+    }
 }
 
 /// A scene ready to run in the reference executor.
@@ -186,6 +425,7 @@ impl Simulation {
             speed_capped_events: capped,
             left_domain_events: left,
             last,
+            kernel: None,
         }
     }
 }

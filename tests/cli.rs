@@ -99,6 +99,14 @@ fn run_help_documents_every_option() {
         "--record",
         "--record-every",
         "--json",
+        "--executor",
+        "--worlds",
+        "--threads",
+        "--mode",
+        "--window",
+        "--partition",
+        "--schedule-seed",
+        "--schedule",
     ] {
         assert!(help.contains(opt), "run --help lacks {opt}:\n{help}");
     }
@@ -403,4 +411,121 @@ fn record_every_needs_record_and_must_be_positive() {
     let o = soda(&with(&["--record", "x.csv", "--record-every", "0"]));
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--record-every"));
+}
+
+#[test]
+fn every_executor_mode_and_partition_prints_the_reference_hash() {
+    let base = [
+        "run",
+        "--steps",
+        "30",
+        "--objects",
+        "27",
+        "--scene",
+        "sparse-gas",
+    ];
+    let reference = summary_hash(&ok(&base));
+    for (executor, mode, partition) in [
+        ("virtual", "cell", "blocks"),
+        ("virtual", "world", "kmeans"),
+        ("virtual", "conservative", "random"),
+        ("threaded", "cell", "random"),
+        ("threaded", "world", "blocks"),
+        ("threaded", "conservative", "kmeans"),
+    ] {
+        let mut args = base.to_vec();
+        args.extend([
+            "--executor",
+            executor,
+            "--worlds",
+            "6",
+            "--mode",
+            mode,
+            "--partition",
+            partition,
+            "--window",
+            "5",
+        ]);
+        if executor == "threaded" {
+            args.extend(["--threads", "2"]);
+        }
+        let out = ok(&args);
+        assert_eq!(summary_hash(&out), reference, "{args:?}:\n{out}");
+        for line in ["worlds", "efficiency", "rollbacks", "messages"] {
+            assert!(
+                out.lines().any(|l| l.starts_with(line)),
+                "no `{line}` line:\n{out}"
+            );
+        }
+    }
+}
+
+#[test]
+fn kernel_json_reports_counters_and_the_reference_hash() {
+    let reference = json(&with(&["--json"]));
+    let v = json(&with(&["--json", "--executor", "virtual", "--worlds", "3"]));
+    assert_eq!(v["hash"], reference["hash"]);
+    assert_eq!(v["executor"], "virtual");
+    assert_eq!(v["kernel"]["worlds"], 3);
+    let total = &v["kernel"]["counters"]["total"];
+    assert!(
+        total["cells_computed"].as_u64().unwrap() >= total["cells_committed"].as_u64().unwrap()
+    );
+    assert!(
+        reference.get("kernel").is_none(),
+        "the reference has no kernel report"
+    );
+}
+
+#[test]
+fn a_recording_is_the_same_file_whatever_the_executor() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut files = Vec::new();
+    for (k, extra) in [
+        vec![],
+        vec![
+            "--executor",
+            "virtual",
+            "--worlds",
+            "4",
+            "--schedule-seed",
+            "9",
+        ],
+        vec!["--executor", "threaded", "--worlds", "5", "--threads", "2"],
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let file = dir.path().join(format!("r{k}.csv"));
+        let mut args = with(&["--record", file.to_str().unwrap(), "--record-every", "2"]);
+        args.extend(extra);
+        ok(&args);
+        files.push(std::fs::read_to_string(&file).unwrap());
+    }
+    assert!(files[0].lines().count() > 8);
+    assert_eq!(files[1], files[0], "virtual recording differs");
+    assert_eq!(files[2], files[0], "threaded recording differs");
+}
+
+#[test]
+fn kernel_flags_that_do_not_apply_to_the_executor_are_errors_naming_the_fix() {
+    let err = fails(&with(&["--worlds", "4"]));
+    assert!(
+        err.contains("--worlds") && err.contains("--executor virtual"),
+        "{err}"
+    );
+    let err = fails(&with(&["--executor", "threaded", "--schedule-seed", "3"]));
+    assert!(
+        err.contains("--schedule-seed") && err.contains("--executor virtual"),
+        "{err}"
+    );
+    let err = fails(&with(&["--executor", "virtual", "--threads", "2"]));
+    assert!(
+        err.contains("--threads") && err.contains("--executor threaded"),
+        "{err}"
+    );
+    let err = fails(&with(&["--executor", "virtual", "--schedule", "nonsense"]));
+    assert!(err.contains("--schedule") && err.contains("v1:"), "{err}");
+    let o = soda(&with(&["--executor", "virtual", "--window", "0"]));
+    assert_eq!(o.status.code(), Some(2), "a zero window is a usage error");
 }

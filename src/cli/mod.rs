@@ -3,6 +3,7 @@
 //! later commands (`verify`, benchmarks) and later `run` options (executor, worlds, threads,
 //! rollback mode, window, partition, schedule seed) slot in without reshaping the rest.
 
+mod exec_args;
 mod output;
 mod record;
 mod run;
@@ -28,9 +29,11 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Run a scene in the reference executor and print a summary with the final state hash.
+    /// Run a scene on an executor (reference, virtual or threaded) and print a summary with
+    /// the final state hash.
     ///
-    /// With no arguments: the built-in `falling-cubes` scene, 1,000 cubes, 600 steps.
+    /// With no arguments: the built-in `falling-cubes` scene, 1,000 cubes, 600 steps, on the
+    /// reference executor.
     #[command(after_help = run::AFTER_HELP)]
     Run(run::RunArgs),
     /// List the built-in scenes, or print one as a TOML scene file to start your own from.

@@ -7,8 +7,7 @@
 //! to the same `f32` bits.
 
 use anyhow::{Context, Result};
-use soda::state::CellStates;
-use soda::{Body, RigidBodyModel};
+use soda::Body;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -45,14 +44,23 @@ impl Recorder {
         })
     }
 
-    /// Records the state at `step` if `step` is selected. Write errors are kept and
-    /// reported by [`Recorder::finish`].
-    pub fn frame(&mut self, step: u64, state: &CellStates<Body>) {
+    /// The steps this recorder records (besides the initial state).
+    pub fn wanted(&self) -> soda::frame::StatesWanted {
+        soda::frame::StatesWanted {
+            every: self.every,
+            step: Some(self.last),
+            unexpected: None,
+        }
+    }
+
+    /// Records the bodies (sorted by id) of step `step` if `step` is selected. Write errors
+    /// are kept and reported by [`Recorder::finish`].
+    pub fn frame(&mut self, step: u64, bodies: &[&Body]) {
         if self.error.is_some() || !(step % self.every == 0 || step == self.last) {
             return;
         }
         self.frames += 1;
-        for b in state.sorted::<RigidBodyModel>() {
+        for &b in bodies {
             if let Err(e) = write_row(&mut self.out, step, b) {
                 self.error = Some(e);
                 return;
@@ -61,9 +69,9 @@ impl Recorder {
     }
 
     /// Records `step` whether or not it is selected (used for the initial state).
-    pub fn frame_always(&mut self, step: u64, state: &CellStates<Body>) {
+    pub fn frame_always(&mut self, step: u64, bodies: &[&Body]) {
         let every = std::mem::replace(&mut self.every, 1);
-        self.frame(step, state);
+        self.frame(step, bodies);
         self.every = every;
     }
 

@@ -1,12 +1,15 @@
 //! `soda run`: run a scene and print a summary (or the report as JSON).
 
+use super::exec_args::ExecutorArgs;
 use super::output::print;
 use super::record::Recorder;
 use super::source::{Origin, SceneArgs};
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use soda::{RunReport, Simulation};
+use soda::frame::StatesWanted;
+use soda::sim::{run_scene, RunReport};
+use soda::{Body, RigidBodyModel};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -17,6 +20,8 @@ Examples:
   soda run --objects 8000 --steps 300          a bigger pile, 5 simulated seconds
   soda run --scene sparse-gas --seed 3 --json  the report as JSON
   soda run --scene scenes/ramp.toml --record ramp.csv --record-every 10
+  soda run --executor virtual --worlds 8 --mode cell --schedule-seed 3
+  soda run --executor threaded --threads 2 --worlds 8 --objects 8000
 
 The summary's last line is `hash` and the final state hash (16 hex digits): two runs of
 the same scene and options always print the same hash.";
@@ -31,8 +36,9 @@ pub struct RunArgs {
     #[arg(long, value_name = "N", default_value_t = 600, help_heading = "Run")]
     pub steps: u64,
 
-    // Executor options (--executor, --worlds, --threads, --mode, --window, --partition,
-    // --schedule-seed) go here as a flattened `ExecutorArgs` with its own help heading.
+    #[command(flatten)]
+    pub executor: ExecutorArgs,
+
     #[command(flatten)]
     pub output: OutputArgs,
 }
@@ -59,25 +65,37 @@ pub struct OutputArgs {
 
 /// Runs the command.
 pub fn run(args: &RunArgs) -> Result<()> {
+    let options = args.executor.options()?;
     let (scene, origin) = args.scene.load()?;
     let initial_bodies = scene.bodies.len();
-    let mut sim = Simulation::new(scene);
-    let first = sim.reference().step_number();
-    let last = first.saturating_add(args.steps);
+    let last = args.steps;
     let mut recorder = match &args.output.record {
         Some(path) => Some(Recorder::create(path, args.output.record_every, last)?),
         None => None,
     };
+    let mut wanted = StatesWanted::none();
     if let Some(r) = recorder.as_mut() {
-        r.frame_always(first, sim.state());
+        let grid = scene.grid();
+        let mut initial: Vec<Body> = scene
+            .initial_bodies()
+            .into_iter()
+            .filter(|b| {
+                grid.cell_of(<RigidBodyModel as soda::CellModel>::position(b))
+                    .is_some()
+            })
+            .collect();
+        initial.sort_by_key(|b| b.id);
+        r.frame_always(0, &initial.iter().collect::<Vec<_>>());
+        wanted = r.wanted();
     }
     let progress = progress_bar(args, initial_bodies);
-    let report = sim.run(args.steps, |frame, state| {
-        if let Some(r) = recorder.as_mut() {
-            r.frame(frame.step, state);
+    let report = run_scene(&scene, &options, args.steps, &wanted, |frame, states| {
+        if let (Some(r), Some(states)) = (recorder.as_mut(), states) {
+            r.frame(frame.step, states);
         }
         progress.inc(1);
-    });
+    })
+    .with_context(|| format!("the {} executor failed", options.executor.name()))?;
     progress.finish_and_clear();
     let recorded = recorder.map(Recorder::finish).transpose()?;
     if args.output.json {
@@ -177,6 +195,69 @@ fn summary(
             ),
         ),
     ];
+    if let Some(k) = &r.kernel {
+        let c = &k.counters.total;
+        lines.push((
+            "worlds",
+            format!(
+                "{} ({:?} partition), mode {}, window {}, {} thread{}",
+                k.worlds,
+                k.partition,
+                k.mode.name(),
+                k.window,
+                k.threads,
+                if k.threads == 1 { "" } else { "s" }
+            ),
+        ));
+        lines.push((
+            "efficiency",
+            format!(
+                "{:.4} ({} of {} cell computations committed)",
+                k.efficiency, c.cells_committed, c.cells_computed
+            ),
+        ));
+        lines.push((
+            "rollbacks",
+            format!(
+                "{} ({} primary, {} secondary), {} steps rolled back, {} cells recomputed",
+                c.rollbacks(),
+                c.rollbacks_primary,
+                c.rollbacks_secondary,
+                c.steps_rolled_back,
+                c.cells_recomputed
+            ),
+        ));
+        lines.push((
+            "messages",
+            format!(
+                "{} sent ({} ghost, {} migrate, {} null), {} anti-messages",
+                c.messages_sent,
+                c.ghosts_sent,
+                c.migrates_sent,
+                c.null_messages_sent,
+                c.anti_messages_sent
+            ),
+        ));
+        lines.push((
+            "gvt",
+            format!(
+                "{} advances, peak log {} bytes",
+                k.counters.gvt_advances, c.peak_log_bytes
+            ),
+        ));
+        if let Some(t) = &k.thread_times {
+            lines.push((
+                "thread time",
+                format!(
+                    "busy {} s, gvt {} s, idle {} s (summed over threads), {} steals",
+                    num(t.busy_seconds),
+                    num(t.gvt_seconds),
+                    num(t.idle_seconds),
+                    t.steals
+                ),
+            ));
+        }
+    }
     if let Some(rec) = recorded {
         lines.push(("recorded", rec.to_string()));
     }

@@ -45,7 +45,7 @@ pub trait Facade: Send + Sync + 'static {
     /// Waits for a thread; `Err` if it panicked.
     fn join(h: Self::Handle) -> Result<(), String>;
     /// Gives the processor to another thread; `spins` counts consecutive idle calls so an
-    /// implementation may back off.
+    /// implementation may back off (`u32::MAX`: a poller that may sleep longest).
     fn pause(spins: u32);
 }
 
@@ -97,10 +97,10 @@ impl Facade for StdFacade {
     }
 
     fn pause(spins: u32) {
-        if spins < 64 {
-            std::thread::yield_now();
-        } else {
-            std::thread::sleep(std::time::Duration::from_micros(50));
+        match spins {
+            0..64 => std::thread::yield_now(),
+            u32::MAX => std::thread::sleep(std::time::Duration::from_micros(500)),
+            _ => std::thread::sleep(std::time::Duration::from_micros(50)),
         }
     }
 }

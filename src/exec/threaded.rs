@@ -17,7 +17,7 @@
 //! This is the only module that starts threads, and it does so through [`Facade`].
 
 use super::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex, StdFacade};
-use crate::frame::{Event, Frame};
+use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::kernel::counters::Counters;
 use crate::kernel::message::Message;
@@ -27,6 +27,7 @@ use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
 use crate::state::{canonical_hash, CellStates};
 use crossbeam_deque::{Injector, Steal, Stealer, Worker};
+use std::collections::VecDeque;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 use std::time::Instant;
@@ -93,6 +94,9 @@ const RUNNING: u64 = 0;
 const DONE: u64 = 1;
 const FAILED: u64 = 2;
 
+/// The `spins` the output stage passes to [`Facade::pause`]: it polls at a slow pace.
+const OUTPUT_PAUSE: u32 = u32::MAX;
+
 struct Shared<M: CellModel + 'static, F: Facade> {
     worlds: Vec<F::Mutex<World<M>>>,
     inboxes: Vec<F::Mutex<Vec<Message<M::State>>>>,
@@ -103,15 +107,27 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     gvt_round: F::Atomic,
     status: F::Atomic,
     target: Step,
-    out: F::Mutex<Output>,
+    wanted: StatesWanted,
+    out: F::Mutex<Output<M::State>>,
     error: F::Mutex<Option<ExecError>>,
 }
 
-#[derive(Default)]
-struct Output {
-    frames: Vec<Frame>,
+/// Committed frames waiting for the output stage (the calling thread), with the states the
+/// sink asked for.
+struct Output<S> {
+    pending: VecDeque<(Frame, Option<Vec<S>>)>,
     gvt_advances: u64,
     times: ThreadTimes,
+}
+
+impl<S> Default for Output<S> {
+    fn default() -> Self {
+        Output {
+            pending: VecDeque::new(),
+            gvt_advances: 0,
+            times: ThreadTimes::default(),
+        }
+    }
 }
 
 impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
@@ -216,12 +232,16 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
                 bodies: all.len(),
                 events,
             };
+            let states = self
+                .wanted
+                .wants(t, frame.hash)
+                .then(|| all.iter().map(|s| (*s).clone()).collect());
             drop(all);
             for w in worlds.iter_mut() {
                 w.note_committed(t);
             }
             committed = t;
-            out.frames.push(frame);
+            out.pending.push_back((frame, states));
         }
         out.gvt_advances += 1;
         for w in worlds.iter_mut() {
@@ -330,10 +350,22 @@ pub fn run_threaded<M: CellModel + 'static>(
     threads: usize,
     steps: u64,
 ) -> Result<ThreadedReport, ExecError> {
-    run_threaded_with::<M, StdFacade>(model, grid, initial, config, threads, steps)
+    run_threaded_with::<M, StdFacade>(
+        model,
+        grid,
+        initial,
+        config,
+        threads,
+        steps,
+        StatesWanted::none(),
+        |_, _| {},
+    )
 }
 
-/// [`run_threaded`] over any [`Facade`] (shuttle tests pass their own).
+/// [`run_threaded`] over any [`Facade`] (shuttle tests pass their own), handing every
+/// committed frame, in step order, to `sink` on the calling thread (the output stage),
+/// with the committed states (sorted by id) of the steps `wanted` asks for.
+#[allow(clippy::too_many_arguments)]
 pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     model: M,
     grid: Grid,
@@ -341,6 +373,8 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     config: &KernelConfig,
     threads: usize,
     steps: u64,
+    wanted: StatesWanted,
+    mut sink: impl FnMut(&Frame, Option<&[&M::State]>),
 ) -> Result<ThreadedReport, ExecError> {
     let start = Instant::now();
     let threads = threads.max(1);
@@ -387,6 +421,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         gvt_round: F::Atomic::new(0),
         status: F::Atomic::new(if steps == 0 { DONE } else { RUNNING }),
         target: steps,
+        wanted,
         out: F::Mutex::new(Output::default()),
         error: F::Mutex::new(None),
     });
@@ -404,6 +439,25 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
             F::spawn(move || shared.worker_loop(me, local, stealers))
         })
         .collect();
+    // The output stage: hand committed frames to the sink while the workers run.
+    let mut frames = Vec::new();
+    let mut deliver = |batch: VecDeque<(Frame, Option<Vec<M::State>>)>| {
+        for (frame, states) in batch {
+            if frames.len() < steps as usize {
+                let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
+                sink(&frame, refs.as_deref());
+                frames.push(frame);
+            }
+        }
+    };
+    while shared.status.load() == RUNNING {
+        let batch = std::mem::take(&mut shared.out.lock().pending);
+        if batch.is_empty() {
+            F::pause(OUTPUT_PAUSE);
+        } else {
+            deliver(batch);
+        }
+    }
     let mut thread_error = None;
     for h in handles {
         if let Err(e) = F::join(h) {
@@ -417,15 +471,15 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         return Err(ExecError::Thread(e));
     }
     let mut out = std::mem::take(&mut *shared.out.lock());
+    deliver(std::mem::take(&mut out.pending));
     let world_counters = shared
         .worlds
         .iter()
         .map(|w| w.lock().counters().clone())
         .collect();
     let counters = Counters::from_worlds(world_counters, out.gvt_advances, shared.gvt.load());
-    out.frames.truncate(steps as usize);
     Ok(ThreadedReport {
-        frames: out.frames,
+        frames,
         counters,
         times: out.times,
         wall_seconds: start.elapsed().as_secs_f64(),

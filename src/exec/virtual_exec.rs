@@ -37,7 +37,7 @@
 //! assert_eq!(again.run(20), frames);
 //! ```
 
-use crate::frame::{Event, Frame};
+use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::kernel::config::RollbackMode;
 use crate::kernel::config::{KernelConfig, ScheduleSpec};
@@ -367,16 +367,27 @@ impl<M: CellModel> VirtualRun<M> {
     /// Runs until exactly `steps` more steps are committed, handing each committed frame to `sink`
     /// in step order.
     pub fn run_with(&mut self, steps: u64, mut sink: impl FnMut(Frame)) {
+        self.run_with_states(steps, &StatesWanted::none(), |f, _| sink(f));
+    }
+
+    /// [`run_with`](Self::run_with), also handing the sink the committed states (sorted by
+    /// id) of the steps `wanted` asks for.
+    pub fn run_with_states(
+        &mut self,
+        steps: u64,
+        wanted: &StatesWanted,
+        mut sink: impl FnMut(Frame, Option<&[&M::State]>),
+    ) {
         let target = self.committed + steps;
         self.limit = target;
         self.end = self.end.max(target);
         for w in &mut self.worlds {
             w.set_end(target);
         }
-        self.update_gvt(&mut sink);
+        self.update_gvt(wanted, &mut sink);
         while self.committed < target {
             self.decide();
-            self.update_gvt(&mut sink);
+            self.update_gvt(wanted, &mut sink);
         }
     }
 
@@ -415,7 +426,11 @@ impl<M: CellModel> VirtualRun<M> {
         }
     }
 
-    fn update_gvt(&mut self, sink: &mut impl FnMut(Frame)) {
+    fn update_gvt(
+        &mut self,
+        wanted: &StatesWanted,
+        sink: &mut impl FnMut(Frame, Option<&[&M::State]>),
+    ) {
         let new = global_virtual_time(
             self.worlds.iter().map(|w| w.bound()),
             self.in_flight.keys().next().copied(),
@@ -431,12 +446,16 @@ impl<M: CellModel> VirtualRun<M> {
         }
         while self.committed + 1 < new && self.committed < self.limit {
             let t = self.committed + 1;
-            let frame = self.frame(t);
+            let (frame, all) = self.frame(t);
+            if wanted.wants(t, frame.hash) {
+                sink(frame, Some(&all));
+            } else {
+                sink(frame, None);
+            }
             for w in &mut self.worlds {
                 w.note_committed(t);
             }
             self.committed = t;
-            sink(frame);
         }
         for w in &mut self.worlds {
             w.sample_log_bytes();
@@ -444,7 +463,7 @@ impl<M: CellModel> VirtualRun<M> {
         }
     }
 
-    fn frame(&self, t: Step) -> Frame {
+    fn frame(&self, t: Step) -> (Frame, Vec<&M::State>) {
         let mut all: Vec<&M::State> = self.worlds.iter().flat_map(|w| w.state_at(t)).collect();
         all.sort_by_key(|s| M::id(s));
         let mut events: Vec<Event> = self
@@ -454,12 +473,13 @@ impl<M: CellModel> VirtualRun<M> {
             .copied()
             .collect();
         events.sort();
-        Frame {
+        let frame = Frame {
             step: t,
             hash: canonical_hash::<M>(all.iter().copied()),
             bodies: all.len(),
             events,
-        }
+        };
+        (frame, all)
     }
 }
 

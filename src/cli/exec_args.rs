@@ -1,0 +1,169 @@
+//! Options choosing the executor and the Time Warp kernel's configuration, shared by the
+//! commands that run a scene.
+
+use anyhow::{bail, Result};
+use clap::{Args, ValueEnum};
+use soda::exec::virtual_exec::parse_schedule;
+use soda::kernel::{KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::sim::{ExecutorKind, RunOptions};
+
+/// `--executor` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExecutorArg {
+    /// One thread, no worlds: the oracle every other executor is compared with.
+    Reference,
+    /// One thread runs the worlds under a seeded, replayable schedule.
+    Virtual,
+    /// OS threads run the worlds on work stealing.
+    Threaded,
+}
+
+/// `--mode` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModeArg {
+    /// Rollback-and-Propagate: recompute only the cells a straggler affects.
+    Cell,
+    /// Classic Time Warp: recompute the whole territory.
+    World,
+    /// No speculation (null messages); never rolls back.
+    Conservative,
+}
+
+impl From<ModeArg> for RollbackMode {
+    fn from(m: ModeArg) -> Self {
+        match m {
+            ModeArg::Cell => RollbackMode::Cell,
+            ModeArg::World => RollbackMode::World,
+            ModeArg::Conservative => RollbackMode::Conservative,
+        }
+    }
+}
+
+/// `--partition` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PartitionArg {
+    /// Axis-aligned blocks.
+    Blocks,
+    /// The thesis's equal-size k-means over body positions (seeded by --partition-seed).
+    Kmeans,
+    /// Every cell to a random world (the most fragmented territories).
+    Random,
+}
+
+impl From<PartitionArg> for PartitionKind {
+    fn from(p: PartitionArg) -> Self {
+        match p {
+            PartitionArg::Blocks => PartitionKind::Blocks,
+            PartitionArg::Kmeans => PartitionKind::KMeans,
+            PartitionArg::Random => PartitionKind::Random,
+        }
+    }
+}
+
+/// Options of the executor and the kernel.
+#[derive(Debug, Clone, Args)]
+#[command(next_help_heading = "Executor")]
+pub struct ExecutorArgs {
+    /// The executor: all three commit bit-identical states.
+    #[arg(long, value_enum, default_value = "reference")]
+    pub executor: ExecutorArg,
+    /// Number of worlds (logical processes) [default: 4]. Virtual and threaded only.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=4096))]
+    pub worlds: Option<u64>,
+    /// OS threads of the threaded executor [default: the available cores].
+    #[arg(long, value_name = "T", value_parser = clap::value_parser!(u64).range(1..=256))]
+    pub threads: Option<u64>,
+    /// Rollback mode [default: cell]. Virtual and threaded only.
+    #[arg(long, value_enum, value_name = "MODE")]
+    pub mode: Option<ModeArg>,
+    /// Optimism window: no world computes past GVT + W [default: 16]. Virtual and threaded
+    /// only.
+    #[arg(long, value_name = "W", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub window: Option<u64>,
+    /// How cells are assigned to worlds [default: blocks]. Virtual and threaded only.
+    #[arg(long, value_enum, value_name = "KIND")]
+    pub partition: Option<PartitionArg>,
+    /// Seed of the kmeans and random partitioners [default: 0].
+    #[arg(long, value_name = "S")]
+    pub partition_seed: Option<u64>,
+    /// Seed of the virtual executor's scheduler [default: 0]: the same seed replays the
+    /// same interleaving exactly.
+    #[arg(long, value_name = "S", conflicts_with = "schedule")]
+    pub schedule_seed: Option<u64>,
+    /// Replay a schedule string (`v1:...`) printed by `soda verify` or a fuzz target.
+    #[arg(long, value_name = "STRING")]
+    pub schedule: Option<String>,
+}
+
+impl ExecutorArgs {
+    /// The run options these flags describe, or an error naming a flag that does not apply
+    /// to the chosen executor.
+    pub fn options(&self) -> Result<RunOptions> {
+        let kernel_flags = [
+            ("--worlds", self.worlds.is_some()),
+            ("--mode", self.mode.is_some()),
+            ("--window", self.window.is_some()),
+            ("--partition", self.partition.is_some()),
+            ("--partition-seed", self.partition_seed.is_some()),
+        ];
+        let virtual_flags = [
+            ("--schedule-seed", self.schedule_seed.is_some()),
+            ("--schedule", self.schedule.is_some()),
+        ];
+        let executor = match self.executor {
+            ExecutorArg::Reference => ExecutorKind::Reference,
+            ExecutorArg::Virtual => ExecutorKind::Virtual,
+            ExecutorArg::Threaded => ExecutorKind::Threaded,
+        };
+        if executor == ExecutorKind::Reference {
+            if let Some((flag, _)) = kernel_flags.iter().chain(&virtual_flags).find(|f| f.1) {
+                bail!(
+                    "{flag} configures the Time Warp worlds, which the reference executor does \
+                     not have: add `--executor virtual` or `--executor threaded`"
+                );
+            }
+        }
+        if executor != ExecutorKind::Virtual {
+            if let Some((flag, _)) = virtual_flags.iter().find(|f| f.1) {
+                bail!(
+                    "{flag} drives the virtual executor's scheduler: add `--executor virtual` \
+                     (threaded runs are scheduled by the operating system)"
+                );
+            }
+        }
+        if self.threads.is_some() && executor != ExecutorKind::Threaded {
+            bail!("--threads applies to the threaded executor only: add `--executor threaded`");
+        }
+        let schedule = match (&self.schedule, self.schedule_seed) {
+            (Some(s), _) => parse_schedule(s).map_err(|e| {
+                anyhow::anyhow!("--schedule `{}` is not a schedule string: {e}", short(s))
+            })?,
+            (None, seed) => ScheduleSpec::Seeded(seed.unwrap_or(0)),
+        };
+        let kernel = KernelConfig::new(self.worlds.unwrap_or(4) as usize)
+            .mode(self.mode.map_or(RollbackMode::Cell, Into::into))
+            .window(self.window.unwrap_or(16))
+            .partition(self.partition.map_or(PartitionKind::Blocks, Into::into))
+            .partition_seed(self.partition_seed.unwrap_or(0))
+            .schedule(schedule)
+            .record_schedule(false);
+        Ok(RunOptions {
+            executor,
+            kernel,
+            threads: self.threads.map_or_else(default_threads, |t| t as usize),
+        })
+    }
+}
+
+/// The available cores (1 if unknown).
+pub fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+fn short(s: &str) -> String {
+    if s.chars().count() > 40 {
+        format!("{}…", s.chars().take(40).collect::<String>())
+    } else {
+        s.to_string()
+    }
+}
