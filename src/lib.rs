@@ -12,6 +12,7 @@
 //!
 //! SPEC.md is the precise contract.
 
+pub mod divergence;
 pub mod exec;
 pub mod frame;
 pub mod grid;

@@ -72,4 +72,17 @@ pub trait CellModel: Send + Sync {
 
     /// Feeds every bit of the state that matters into the canonical hash.
     fn hash_state(state: &Self::State, hasher: &mut StateHash);
+
+    /// The state's hashed fields as (name, value) pairs, in hash order, for divergence
+    /// reports (the first field whose value differs is named). Values should show the exact
+    /// bits. The default is the whole state as one field.
+    fn fields(state: &Self::State) -> Vec<(String, String)> {
+        vec![("state".to_string(), format!("{state:?}"))]
+    }
+}
+
+/// An `f32` written so two different bit patterns never look alike: shortest decimal and
+/// the raw bits.
+pub fn exact_f32(v: f32) -> String {
+    format!("{v:?} (0x{:08x})", v.to_bits())
 }

@@ -529,3 +529,85 @@ fn kernel_flags_that_do_not_apply_to_the_executor_are_errors_naming_the_fix() {
     let o = soda(&with(&["--executor", "virtual", "--window", "0"]));
     assert_eq!(o.status.code(), Some(2), "a zero window is a usage error");
 }
+
+#[test]
+fn verify_passes_on_a_correct_kernel_and_lists_every_run() {
+    let out = ok(&[
+        "verify",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "27",
+        "--steps",
+        "20",
+        "--worlds",
+        "4",
+        "--schedules",
+        "2",
+        "--repeats",
+        "1",
+    ]);
+    let runs = out.lines().filter(|l| l.starts_with("ok ")).count();
+    assert_eq!(runs, 3 * (2 + 1), "{out}");
+    assert!(out.contains("all 9 runs committed"), "{out}");
+}
+
+#[test]
+fn verify_reports_the_first_divergence_of_a_planted_bug_with_a_command_that_reproduces_it() {
+    let o = soda(&[
+        "verify",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "125",
+        "--steps",
+        "60",
+        "--modes",
+        "cell",
+        "--schedules",
+        "2",
+        "--repeats",
+        "1",
+        "--planted-bug",
+        "drop-lone-anti",
+    ]);
+    let (out, err) = (stdout(&o), stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{out}\n{err}");
+    assert!(err.contains("diverged from the reference"), "{err}");
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("DIVERGED"))
+        .expect("a DIVERGED line");
+    for word in ["first divergence at step", "body", "field", "reference"] {
+        assert!(line.contains(word), "`{word}` missing: {line}");
+    }
+    let cmd = out
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("reproduce: soda "))
+        .expect("a reproduce line");
+    let args: Vec<&str> = cmd.split_whitespace().collect();
+    let step: u64 = args[args.iter().position(|a| *a == "--steps").unwrap() + 1]
+        .parse()
+        .unwrap();
+    // The reproducing command ends at the divergent step with a hash the reference does not have.
+    let bad = summary_hash(&ok(&args));
+    let reference = summary_hash(&ok(&[
+        "run",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "125",
+        "--steps",
+        &step.to_string(),
+    ]));
+    assert_ne!(bad, reference, "{cmd}");
+}
+
+#[test]
+fn verify_rejects_an_unknown_mode_naming_the_allowed_ones() {
+    let err = fails(&["verify", "--modes", "cell,fast"]);
+    assert!(
+        err.contains("fast") && err.contains("conservative"),
+        "{err}"
+    );
+}

@@ -4,7 +4,7 @@
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use soda::exec::virtual_exec::parse_schedule;
-use soda::kernel::{KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
 use soda::sim::{ExecutorKind, RunOptions};
 
 /// `--executor` values.
@@ -93,6 +93,27 @@ pub struct ExecutorArgs {
     /// Replay a schedule string (`v1:...`) printed by `soda verify` or a fuzz target.
     #[arg(long, value_name = "STRING")]
     pub schedule: Option<String>,
+    /// A deliberate kernel bug, to prove the checks can fire (never for real runs).
+    #[arg(long, value_enum, hide = true)]
+    pub planted_bug: Option<PlantedBugArg>,
+}
+
+/// `--planted-bug` values (hidden).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PlantedBugArg {
+    /// Lazy cancellation compares outputs by body ids only.
+    CutoffByIdsOnly,
+    /// Anti-messages that leave nothing in their place are not sent.
+    DropLoneAnti,
+}
+
+impl From<PlantedBugArg> for PlantedBug {
+    fn from(b: PlantedBugArg) -> Self {
+        match b {
+            PlantedBugArg::CutoffByIdsOnly => PlantedBug::CutoffByIdsOnly,
+            PlantedBugArg::DropLoneAnti => PlantedBug::DropLoneAnti,
+        }
+    }
 }
 
 impl ExecutorArgs {
@@ -105,6 +126,7 @@ impl ExecutorArgs {
             ("--window", self.window.is_some()),
             ("--partition", self.partition.is_some()),
             ("--partition-seed", self.partition_seed.is_some()),
+            ("--planted-bug", self.planted_bug.is_some()),
         ];
         let virtual_flags = [
             ("--schedule-seed", self.schedule_seed.is_some()),
@@ -140,13 +162,14 @@ impl ExecutorArgs {
             })?,
             (None, seed) => ScheduleSpec::Seeded(seed.unwrap_or(0)),
         };
-        let kernel = KernelConfig::new(self.worlds.unwrap_or(4) as usize)
+        let mut kernel = KernelConfig::new(self.worlds.unwrap_or(4) as usize)
             .mode(self.mode.map_or(RollbackMode::Cell, Into::into))
             .window(self.window.unwrap_or(16))
             .partition(self.partition.map_or(PartitionKind::Blocks, Into::into))
             .partition_seed(self.partition_seed.unwrap_or(0))
             .schedule(schedule)
             .record_schedule(false);
+        kernel.planted_bug = self.planted_bug.map_or(PlantedBug::None, Into::into);
         Ok(RunOptions {
             executor,
             kernel,

@@ -9,6 +9,7 @@ mod record;
 mod run;
 mod scenes;
 mod source;
+mod verify;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -39,6 +40,13 @@ enum Command {
     /// List the built-in scenes, or print one as a TOML scene file to start your own from.
     #[command(after_help = scenes::AFTER_HELP)]
     Scenes(scenes::ScenesArgs),
+    /// Check that the virtual and threaded executors commit the reference's bits: every
+    /// step's hash, under many schedules, thread interleavings and rollback modes.
+    ///
+    /// A divergence is reported as the first step, body, field and cell that differ, with
+    /// the command that reproduces it; the exit status is then 1.
+    #[command(after_help = verify::AFTER_HELP)]
+    Verify(verify::VerifyArgs),
 }
 
 /// Parses the command line, runs the command and turns any error into a message on stderr
@@ -48,6 +56,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run::run(&args),
         Command::Scenes(args) => scenes::scenes(&args),
+        Command::Verify(args) => verify::verify(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

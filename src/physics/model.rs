@@ -172,4 +172,29 @@ impl CellModel for RigidBodyModel {
             h.f32(c);
         }
     }
+
+    fn fields(b: &Body) -> Vec<(String, String)> {
+        let q = b.rotation.quaternion();
+        let named = [
+            (
+                "position",
+                [b.position.x, b.position.y, b.position.z].to_vec(),
+            ),
+            ("linvel", [b.linvel.x, b.linvel.y, b.linvel.z].to_vec()),
+            ("angvel", [b.angvel.x, b.angvel.y, b.angvel.z].to_vec()),
+            ("rotation", [q.w, q.i, q.j, q.k].to_vec()),
+        ];
+        let mut out = Vec::new();
+        for (name, values) in named {
+            let axes: &[&str] = if values.len() == 4 {
+                &["w", "x", "y", "z"]
+            } else {
+                &["x", "y", "z"]
+            };
+            for (axis, v) in axes.iter().zip(values) {
+                out.push((format!("{name}.{axis}"), crate::model::exact_f32(v)));
+            }
+        }
+        out
+    }
 }
