@@ -15,6 +15,7 @@
 pub mod divergence;
 pub mod exec;
 pub mod frame;
+pub mod fuzzing;
 pub mod grid;
 pub mod hash;
 pub mod kernel;

@@ -1,0 +1,401 @@
+//! The checks behind the cargo-fuzz targets in `fuzz/` and the replay test
+//! `tests/fuzz_replay.rs`, kept in the library so both call exactly the same code.
+//!
+//! - [`check_sync_order`]: a small structured input ([`SyncOrderInput`]) picks a cheap scene,
+//!   a kernel configuration and the bytes that drive every decision of the virtual executor
+//!   (which world acts, which in-flight message is delivered next); every committed frame
+//!   must equal the single-threaded reference's. The fuzzer mutates the delivery order
+//!   directly.
+//! - [`check_scene_file`]: arbitrary bytes are parsed and validated as a TOML and as a JSON
+//!   scene file; nothing may panic, an accepted scene must survive a write/read round trip,
+//!   and a small accepted scene is stepped twice in the reference executor.
+//!
+//! Every input is valid: integers are mapped into their ranges with a modulo, and the
+//! schedule bytes fall back to the deterministic FIFO schedule when they run out.
+//!
+//! ```
+//! use soda::fuzzing::{check_sync_order, SyncOrderInput};
+//! use soda::kernel::PlantedBug;
+//!
+//! let input = SyncOrderInput::from_fuzz_bytes(&[0, 30, 7, 0, 3, 0, 2, 0, 1, 12, 250, 3, 9, 77])
+//!     .expect("long enough");
+//! assert_eq!(check_sync_order(&input, PlantedBug::None), Ok(()));
+//! ```
+
+use crate::exec::reference::ReferenceRun;
+use crate::exec::virtual_exec::VirtualRun;
+use crate::frame::Frame;
+use crate::grid::Grid;
+use crate::kernel::synthetic::Particles;
+use crate::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode};
+use crate::model::CellModel;
+use crate::scene::builtin::builtin;
+use crate::scene::{parse_scene, Scene, SceneFormat};
+use arbitrary::{Arbitrary, Unstructured};
+
+/// The input of the `sync_order` fuzz target: a scene, a kernel configuration and the bytes
+/// that drive the virtual executor's scheduler. Every field is mapped into its range with a
+/// modulo ([`SyncOrderInput::case`]), so every value is a valid run.
+///
+/// Its [`Arbitrary`] implementation is written by hand so that the schedule is the raw tail
+/// of the fuzz input: the derived one would read a `Vec<u8>` last field with a continuation
+/// byte before every element, halving what each mutation of the tail means to the scheduler.
+/// The layout is therefore the ten header bytes in field order, then the schedule bytes
+/// ([`SyncOrderInput::to_fuzz_bytes`]).
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct SyncOrderInput {
+    /// Scene choice (modulo 8): 0–3 synthetic particles (odd: open x faces), 4–5
+    /// `sparse-gas`, 6 `falling-cubes`, 7 `chain`.
+    pub scene: u8,
+    /// Body count within the scene's range: particles 2–61, `sparse-gas` 12–24,
+    /// `falling-cubes` 8–27, `chain` 4–10.
+    pub size: u8,
+    /// Particle grid dimensions: x 2–6, y 1–4, z 1–4 cells (ignored by built-in scenes).
+    pub dims: u8,
+    /// Seed of the scene's random placement.
+    pub seed: u8,
+    /// Worlds, 1–8.
+    pub worlds: u8,
+    /// Rollback mode (modulo 3): cell, world, conservative.
+    pub mode: u8,
+    /// Optimism window, 1–16.
+    pub window: u8,
+    /// Partitioner (modulo 3): blocks, k-means, random.
+    pub partition: u8,
+    /// Seed of the k-means and random partitioners.
+    pub partition_seed: u8,
+    /// Steps to commit: 5–30 for particles, 5–20 for the rigid-body scenes.
+    pub steps: u8,
+    /// The scheduler's bytes ([`crate::kernel::ScheduleSpec::Bytes`]): each decision
+    /// consumes one byte (two when more than 256 choices are open), then the deterministic
+    /// FIFO fallback takes over.
+    pub schedule: Vec<u8>,
+}
+
+/// Bytes before the schedule in a fuzz input.
+const HEADER: usize = 10;
+
+impl SyncOrderInput {
+    fn with_header(h: [u8; HEADER], schedule: Vec<u8>) -> Self {
+        let [scene, size, dims, seed, worlds, mode, window, partition, partition_seed, steps] = h;
+        SyncOrderInput {
+            scene,
+            size,
+            dims,
+            seed,
+            worlds,
+            mode,
+            window,
+            partition,
+            partition_seed,
+            steps,
+            schedule,
+        }
+    }
+}
+
+impl<'a> Arbitrary<'a> for SyncOrderInput {
+    fn arbitrary(u: &mut Unstructured<'a>) -> arbitrary::Result<Self> {
+        let header = <[u8; HEADER]>::arbitrary(u)?;
+        Ok(Self::with_header(header, Vec::<u8>::arbitrary(u)?))
+    }
+
+    fn arbitrary_take_rest(mut u: Unstructured<'a>) -> arbitrary::Result<Self> {
+        let header = <[u8; HEADER]>::arbitrary(&mut u)?;
+        Ok(Self::with_header(header, u.take_rest().to_vec()))
+    }
+
+    fn size_hint(_depth: usize) -> (usize, Option<usize>) {
+        (HEADER, None)
+    }
+}
+
+/// The scene an input selects.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum FuzzScene {
+    /// Synthetic particles ([`Particles::scene`]): count, grid dims, open x faces, seed.
+    Particles(usize, [i32; 3], bool, u64),
+    /// A built-in rigid-body scene: name, bodies, seed.
+    Builtin(&'static str, usize, u64),
+}
+
+impl std::fmt::Display for FuzzScene {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            FuzzScene::Particles(n, d, open, seed) => write!(
+                f,
+                "{n} synthetic particles in {}x{}x{} cells{}, seed {seed}",
+                d[0],
+                d[1],
+                d[2],
+                if *open { " (open x faces)" } else { "" }
+            ),
+            FuzzScene::Builtin(name, n, seed) => {
+                write!(f, "built-in `{name}` with {n} bodies, seed {seed}")
+            }
+        }
+    }
+}
+
+/// A decoded [`SyncOrderInput`]: what is run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SyncOrderCase {
+    /// The scene.
+    pub scene: FuzzScene,
+    /// Steps to commit.
+    pub steps: u64,
+    /// The kernel configuration (schedule `Bytes(input.schedule)`, decisions recorded).
+    pub config: KernelConfig,
+}
+
+impl SyncOrderInput {
+    /// Decodes fuzz bytes exactly as `libfuzzer_sys::fuzz_target!` does for a structured
+    /// input: `None` (the input is rejected) if `bytes` is shorter than the lower size
+    /// hint, else `Arbitrary::arbitrary_take_rest(Unstructured::new(bytes))`.
+    pub fn from_fuzz_bytes(bytes: &[u8]) -> Option<Self> {
+        if bytes.len() < <Self as Arbitrary>::size_hint(0).0 {
+            return None;
+        }
+        Self::arbitrary_take_rest(Unstructured::new(bytes)).ok()
+    }
+
+    /// Encodes this input as fuzz bytes that [`SyncOrderInput::from_fuzz_bytes`] decodes
+    /// back to it (to write seed files).
+    pub fn to_fuzz_bytes(&self) -> Vec<u8> {
+        let mut v = vec![
+            self.scene,
+            self.size,
+            self.dims,
+            self.seed,
+            self.worlds,
+            self.mode,
+            self.window,
+            self.partition,
+            self.partition_seed,
+            self.steps,
+        ];
+        v.extend_from_slice(&self.schedule);
+        v
+    }
+
+    /// The run this input selects, with `bug` planted.
+    pub fn case(&self, bug: PlantedBug) -> SyncOrderCase {
+        let seed = u64::from(self.seed);
+        let size = usize::from(self.size);
+        let rigid_steps = 5 + u64::from(self.steps) % 16;
+        let (scene, steps) = match self.scene % 8 {
+            k @ 0..=3 => {
+                let d = usize::from(self.dims);
+                let dims = [2 + d % 5, 1 + (d / 5) % 4, 1 + (d / 20) % 4].map(|x| x as i32);
+                (
+                    FuzzScene::Particles(2 + size % 60, dims, k % 2 == 1, seed),
+                    5 + u64::from(self.steps) % 26,
+                )
+            }
+            4 | 5 => (
+                FuzzScene::Builtin("sparse-gas", 12 + size % 13, seed),
+                rigid_steps,
+            ),
+            6 => (
+                FuzzScene::Builtin("falling-cubes", 8 + size % 20, seed),
+                rigid_steps,
+            ),
+            _ => (FuzzScene::Builtin("chain", 4 + size % 7, seed), rigid_steps),
+        };
+        let mode = [
+            RollbackMode::Cell,
+            RollbackMode::World,
+            RollbackMode::Conservative,
+        ][usize::from(self.mode % 3)];
+        let partition = [
+            PartitionKind::Blocks,
+            PartitionKind::KMeans,
+            PartitionKind::Random,
+        ][usize::from(self.partition % 3)]
+        .clone();
+        let mut config = KernelConfig::new(1 + usize::from(self.worlds % 8))
+            .mode(mode)
+            .window(1 + u64::from(self.window % 16))
+            .partition(partition)
+            .partition_seed(u64::from(self.partition_seed))
+            .schedule(crate::kernel::ScheduleSpec::Bytes(self.schedule.clone()))
+            .record_schedule(true);
+        config.planted_bug = bug;
+        SyncOrderCase {
+            scene,
+            steps,
+            config,
+        }
+    }
+}
+
+/// Runs the input's scene for its steps in the reference executor and in the virtual
+/// executor driven by the input's schedule bytes, and compares every committed frame
+/// (step, hash, body count, events).
+///
+/// On a mismatch the error names the first differing step, both hashes, the scene, the
+/// configuration and the schedule string that replays the run
+/// (`ScheduleSpec::Replay(parse_schedule(..))`, see [`crate::exec::virtual_exec`]).
+///
+/// # Panics
+/// If the kernel itself panics (a locality violation it detects, a deadlock): that is a
+/// finding too.
+pub fn check_sync_order(input: &SyncOrderInput, bug: PlantedBug) -> Result<(), String> {
+    check_case(&input.case(bug))
+}
+
+/// [`check_sync_order`] for an explicit case, e.g. one whose schedule was replaced by the
+/// replay string of a failure.
+pub fn check_case(case: &SyncOrderCase) -> Result<(), String> {
+    match case.scene {
+        FuzzScene::Particles(n, dims, open, seed) => {
+            let (model, grid, bodies) = Particles::scene(n, dims, open, seed);
+            compare(model, grid, bodies, case)
+        }
+        FuzzScene::Builtin(name, n, seed) => {
+            let scene = builtin(name, Some(n), seed)
+                .unwrap_or_else(|e| panic!("built-in scene {name} with {n} bodies: {e}"));
+            compare(scene.model(), scene.grid(), scene.initial_bodies(), case)
+        }
+    }
+}
+
+fn compare<M: CellModel + Clone>(
+    model: M,
+    grid: Grid,
+    bodies: Vec<M::State>,
+    case: &SyncOrderCase,
+) -> Result<(), String> {
+    let (mut reference, _) = ReferenceRun::new(model.clone(), grid.clone(), bodies.clone());
+    let expected: Vec<Frame> = (0..case.steps).map(|_| reference.advance()).collect();
+    let (mut run, _) = VirtualRun::new(model, grid, bodies, &case.config);
+    let frames = run.run(case.steps);
+    let c = &case.config;
+    let describe = || {
+        format!(
+            "scene: {}, {} steps\nconfig: {} worlds, mode {}, window {}, partition {:?} \
+             (seed {}), planted bug {:?}\nreplay with ScheduleSpec::Replay(parse_schedule(..)): {}",
+            case.scene,
+            case.steps,
+            c.worlds,
+            c.mode.name(),
+            c.window,
+            c.partition,
+            c.partition_seed,
+            c.planted_bug,
+            run.schedule_string()
+        )
+    };
+    if frames.len() != expected.len() {
+        return Err(format!(
+            "{} committed frames, expected {}\n{}",
+            frames.len(),
+            expected.len(),
+            describe()
+        ));
+    }
+    match frames.iter().zip(&expected).find(|(a, b)| a != b) {
+        None => Ok(()),
+        Some((a, b)) => Err(format!(
+            "first divergence at step {}: kernel hash {:016x} ({} bodies, {} events) vs \
+             reference {:016x} ({} bodies, {} events)\n{}",
+            b.step,
+            a.hash,
+            a.bodies,
+            a.events.len(),
+            b.hash,
+            b.bodies,
+            b.events.len(),
+            describe()
+        )),
+    }
+}
+
+/// Largest accepted scene [`check_scene_file`] still simulates: bodies.
+pub const SIMULATE_MAX_BODIES: usize = 24;
+/// Largest accepted scene [`check_scene_file`] still simulates: grid cells.
+pub const SIMULATE_MAX_CELLS: usize = 20_000;
+/// Largest accepted scene [`check_scene_file`] still simulates: solver substeps × sweeps
+/// (the default is 20).
+pub const SIMULATE_MAX_ITERATIONS: u32 = 200;
+
+/// What [`check_scene_file`] found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SceneFileOutcome {
+    /// The bytes were valid UTF-8.
+    pub utf8: bool,
+    /// The text parsed and validated as a TOML scene.
+    pub toml: bool,
+    /// The text parsed and validated as a JSON scene.
+    pub json: bool,
+    /// An accepted scene was small enough to be stepped (twice) in the reference executor.
+    pub simulated: bool,
+}
+
+/// Feeds `bytes` (as UTF-8, invalid sequences replaced) to the scene file parser and
+/// validator as TOML and as JSON. It must never panic. Each accepted scene must be written
+/// back by [`SceneFormat::render`] to a text that parses to an equal scene (in both
+/// formats; TOML may refuse a scene without ground), and an accepted scene with at most
+/// [`SIMULATE_MAX_BODIES`] bodies, [`SIMULATE_MAX_CELLS`] cells and
+/// [`SIMULATE_MAX_ITERATIONS`] solver iterations is stepped twice in the reference executor.
+///
+/// # Panics
+/// On a violation: a panic inside soda, or a round trip that changes the scene.
+pub fn check_scene_file(bytes: &[u8]) -> SceneFileOutcome {
+    let text = String::from_utf8_lossy(bytes);
+    let mut outcome = SceneFileOutcome {
+        utf8: std::str::from_utf8(bytes).is_ok(),
+        ..SceneFileOutcome::default()
+    };
+    for format in [SceneFormat::Toml, SceneFormat::Json] {
+        let Ok(scene) = parse_scene(&text, format, "fuzz input") else {
+            continue;
+        };
+        match format {
+            SceneFormat::Toml => outcome.toml = true,
+            SceneFormat::Json => outcome.json = true,
+        }
+        round_trip(&scene);
+        if small(&scene) {
+            let (mut run, _) =
+                ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
+            run.advance();
+            run.advance();
+            outcome.simulated = true;
+        }
+    }
+    outcome
+}
+
+/// Whether an accepted scene is cheap enough to simulate inside a fuzz iteration.
+fn small(scene: &Scene) -> bool {
+    scene.bodies.len() <= SIMULATE_MAX_BODIES
+        && scene.grid().cell_count() <= SIMULATE_MAX_CELLS
+        && scene.solver.substeps.saturating_mul(scene.solver.sweeps) <= SIMULATE_MAX_ITERATIONS
+}
+
+/// Writes `scene` in both formats and reads it back: the same scene (or, for TOML, the
+/// documented refusal of a scene without ground).
+fn round_trip(scene: &Scene) {
+    for format in [SceneFormat::Toml, SceneFormat::Json] {
+        let text = match format.render(scene) {
+            Ok(t) => t,
+            Err(e) => {
+                assert!(
+                    format == SceneFormat::Toml && scene.environment.ground.is_none(),
+                    "an accepted scene could not be written as {format:?}: {e}\nscene: {scene:?}"
+                );
+                continue;
+            }
+        };
+        match parse_scene(&text, format, "round trip") {
+            Ok(back) => assert!(
+                back == *scene,
+                "{format:?} round trip changed the scene\nbefore: {scene:?}\nafter:  {back:?}\ntext:\n{text}"
+            ),
+            Err(e) => panic!(
+                "an accepted scene written as {format:?} does not read back: {e}\ntext:\n{text}"
+            ),
+        }
+    }
+}
