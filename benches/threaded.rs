@@ -1,0 +1,84 @@
+//! Threaded executor against the reference, side by side in one run: `falling-cubes`
+//! (`TH_CUBES`, default 8000) for `TH_STEPS` steps (default 600 = 10 simulated seconds),
+//! the threaded executor on `TH_THREADS` threads (default 2) with each world count of
+//! `TH_WORLDS` (default "2,4,8"), `cell` mode, window `TH_WINDOW` (default 16). Prints wall
+//! times, the speed-up over the reference, efficiency, rollbacks and the threads' busy,
+//! GVT and idle time, and checks every committed hash against the reference's.
+//!
+//! Wall times on a shared 2-core machine are noisy: compare within one run only.
+//!
+//! Run: `cargo bench --bench threaded`; `cargo bench --bench threaded -- --test` (or
+//! `cargo test --benches`) runs a tiny version.
+
+use soda::exec::threaded::run_threaded;
+use soda::kernel::{KernelConfig, RollbackMode};
+use soda::scene::builtin::builtin;
+use soda::ReferenceRun;
+use std::time::Instant;
+
+fn quick() -> bool {
+    let args: Vec<String> = std::env::args().collect();
+    !args.iter().any(|a| a == "--bench") || args.iter().any(|a| a == "--test")
+}
+
+fn env(name: &str, default: &str, quick_value: &str) -> String {
+    if quick() {
+        return quick_value.to_string();
+    }
+    std::env::var(name).unwrap_or_else(|_| default.to_string())
+}
+
+fn main() {
+    let cubes: usize = env("TH_CUBES", "8000", "64").parse().expect("TH_CUBES");
+    let steps: u64 = env("TH_STEPS", "600", "10").parse().expect("TH_STEPS");
+    let threads: usize = env("TH_THREADS", "2", "2").parse().expect("TH_THREADS");
+    let window: u64 = env("TH_WINDOW", "16", "8").parse().expect("TH_WINDOW");
+    let worlds: Vec<usize> = env("TH_WORLDS", "2,4,8", "2,4")
+        .split(',')
+        .map(|w| w.trim().parse().expect("TH_WORLDS"))
+        .collect();
+    let scene = builtin("falling-cubes", Some(cubes), 0).expect("scene");
+    let (mut reference, _) = ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
+    let t = Instant::now();
+    let expected: Vec<u64> = (0..steps).map(|_| reference.advance().hash).collect();
+    let tr = t.elapsed().as_secs_f64();
+    println!(
+        "threaded: falling-cubes {cubes}, {steps} steps, grid {:?}; reference {tr:.2} s ({:.0} body-steps/s)",
+        scene.grid().dims,
+        cubes as f64 * steps as f64 / tr
+    );
+    for &w in &worlds {
+        let config = KernelConfig::new(w)
+            .mode(RollbackMode::Cell)
+            .window(window)
+            .record_schedule(false);
+        let r = run_threaded(
+            scene.model(),
+            scene.grid(),
+            scene.initial_bodies(),
+            &config,
+            threads,
+            steps,
+        )
+        .expect("threaded run");
+        let got: Vec<u64> = r.frames.iter().map(|f| f.hash).collect();
+        assert_eq!(got, expected, "threaded run diverged from the reference");
+        let c = &r.counters.total;
+        let tt = &r.times;
+        println!(
+            "  {threads} threads, {w:2} worlds, cell W{window}: {:.2} s = {:.2}x the reference's speed; efficiency {:.3}, rollbacks {} ({} steps), cells re-executed {}, messages {} + {} anti; thread time busy {:.2} s, gvt {:.2} s, idle {:.2} s, steals {}",
+            r.wall_seconds,
+            tr / r.wall_seconds,
+            c.efficiency(),
+            c.rollbacks(),
+            c.steps_rolled_back,
+            c.cells_recomputed,
+            c.messages_sent,
+            c.anti_messages_sent,
+            tt.busy_seconds,
+            tt.gvt_seconds,
+            tt.idle_seconds,
+            tt.steals
+        );
+    }
+}
