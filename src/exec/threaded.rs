@@ -4,15 +4,17 @@
 //! conservative dependency) simply is not rescheduled until a message or a GVT advance gives
 //! it something to do, so its thread serves other worlds.
 //!
-//! GVT (SPEC.md §Threaded executor): a consistent cut. The thread that runs a GVT round takes
-//! every world's lock in ascending id order, then every inbox lock. A world sends only while
-//! holding its own lock, so with all world locks held no message is in transit: each is in
-//! an inbox or already received. GVT is then the minimum of the worlds' bounds and of the
-//! `affects` step of every inbox message — exactly the virtual executor's rule. The round
-//! commits the steps below the new GVT (frames assembled from all worlds while the cut is
-//! held, so a frame is never torn or speculative), fossil-collects, and releases. Lock order
-//! (worlds ascending, then inboxes; a worker holds one world and at most one inbox) makes
-//! deadlock impossible.
+//! GVT (SPEC.md §K7, §10) without stopping the world: every world publishes a lower bound of
+//! its `bound()` after each turn, every inbox a lower bound of its messages' `affects`; a
+//! message moves from its sender's bound to an inbox (pushed before the sender publishes a
+//! higher bound) and from an inbox to its receiver's bound (lowered before the inbox is
+//! emptied). Every write that can raise a published value first bumps a version counter; a
+//! GVT reader takes the minimum of all published values and accepts it only if the version
+//! did not change meanwhile, so it never misses a message in transit between two of them.
+//! After GVT advances, each world hands its states of the new committed steps to a frame
+//! assembly on its next turn and fossil-collects; a frame is finished (all worlds merged,
+//! sorted, hashed) only once every world has contributed, and queued in step order for the
+//! output stage on the calling thread. A frame is never torn or speculative.
 //!
 //! This is the only module that starts threads, and it does so through [`Facade`].
 
@@ -27,7 +29,7 @@ use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
 use crate::state::{canonical_hash, CellStates};
 use crossbeam_deque::{Injector, Steal, Stealer, Worker};
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 use std::time::Instant;
@@ -98,8 +100,15 @@ const FAILED: u64 = 2;
 const OUTPUT_PAUSE: u32 = u32::MAX;
 
 struct Shared<M: CellModel + 'static, F: Facade> {
-    worlds: Vec<F::Mutex<World<M>>>,
+    worlds: Vec<F::Mutex<Slot<M>>>,
     inboxes: Vec<F::Mutex<Vec<Message<M::State>>>>,
+    /// Per world, a lower bound of its `bound()` (written only under the world's lock).
+    published: Vec<F::Atomic>,
+    /// Per inbox, a lower bound of the `affects` of the messages in it (`u64::MAX`: none).
+    inbox_min: Vec<F::Atomic>,
+    /// Bumped before every write that can raise a `published` or `inbox_min` value, so a
+    /// GVT reader can tell whether its snapshot is consistent (SPEC.md §K7).
+    version: F::Atomic,
     scheduled: Vec<F::Atomic>,
     injector: Injector<usize>,
     gvt: F::Atomic,
@@ -108,8 +117,27 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     status: F::Atomic,
     target: Step,
     wanted: StatesWanted,
+    assembly: F::Mutex<Assembly<M::State>>,
     out: F::Mutex<Output<M::State>>,
     error: F::Mutex<Option<ExecError>>,
+}
+
+/// A world and the last step it has handed to the frame assembly.
+struct Slot<M: CellModel> {
+    world: World<M>,
+    contributed: Step,
+}
+
+/// Committed steps being assembled from the worlds' contributions.
+struct Assembly<S> {
+    partial: BTreeMap<Step, Partial<S>>,
+    next: Step,
+}
+
+struct Partial<S> {
+    worlds: usize,
+    states: Vec<S>,
+    events: Vec<Event>,
 }
 
 /// Committed frames waiting for the output stage (the calling thread), with the states the
@@ -130,6 +158,10 @@ impl<S> Default for Output<S> {
     }
 }
 
+/// Consecutive idle pauses after which a thread checks, under the full cut, whether the run
+/// has stalled (a kernel bug) rather than waiting for ever.
+const STALL_CHECK_SPINS: u32 = 20_000;
+
 impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     fn schedule(&self, w: usize, local: &Worker<usize>) {
         if self.scheduled[w].swap(1) == 0 {
@@ -145,121 +177,193 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         self.status.store(FAILED);
     }
 
-    /// One action of world `w`: receive its inbox, act if it wants to, route the output.
-    fn run_world(&self, w: usize, local: &Worker<usize>) -> bool {
-        let mut world = self.worlds[w].lock();
-        self.scheduled[w].store(0);
-        let incoming: Vec<Message<M::State>> = std::mem::take(&mut *self.inboxes[w].lock());
-        for m in incoming {
-            world.receive(m);
+    /// Sends `m`: into its receiver's inbox, lowering that inbox's published minimum.
+    fn send(&self, m: Message<M::State>, local: &Worker<usize>) {
+        let d = m.dst_world as usize;
+        let affects = m.affects();
+        {
+            let mut inbox = self.inboxes[d].lock();
+            inbox.push(m);
+            self.lower(&self.inbox_min[d], affects);
         }
-        let gvt = self.gvt.load();
-        if !world.wants_to_act(gvt) {
-            return false;
-        }
-        let lvt = world.lvt();
-        match catch_unwind(AssertUnwindSafe(|| world.act(gvt))) {
-            Ok(out) => {
-                for m in out {
-                    let d = m.dst_world as usize;
-                    self.inboxes[d].lock().push(m);
-                    self.schedule(d, local);
-                }
-                if world.wants_to_act(self.gvt.load()) {
-                    self.schedule(w, local);
-                }
-                true
-            }
-            Err(p) => {
-                self.fail(ExecError::WorldPanicked {
-                    world: w as WorldId,
-                    step: lvt,
-                    message: panic_message(&*p),
-                });
-                false
-            }
+        self.schedule(d, local);
+    }
+
+    fn lower(&self, a: &F::Atomic, v: u64) {
+        if v < a.load() {
+            a.store(v);
         }
     }
 
-    /// A GVT round over a consistent cut; returns whether GVT advanced. Only one thread runs
-    /// a round at a time; others skip.
+    /// One turn of world `w`: receive its inbox, hand its newly committed steps to the frame
+    /// assembly and fossil-collect, act if it wants to, route the output, publish its bound.
+    /// Returns whether it acted.
+    fn run_world(&self, w: usize, local: &Worker<usize>) -> bool {
+        let mut slot = self.worlds[w].lock();
+        self.scheduled[w].store(0);
+        {
+            let mut inbox = self.inboxes[w].lock();
+            if !inbox.is_empty() {
+                let incoming = std::mem::take(&mut *inbox);
+                let least = incoming.iter().map(|m| m.affects()).min().unwrap_or(u64::MAX);
+                // The messages move from the inbox's bound to the world's: lower the world's
+                // first, then (a raise) empty the inbox's.
+                self.lower(&self.published[w], least);
+                self.version.fetch_add(1);
+                self.inbox_min[w].store(u64::MAX);
+                drop(inbox);
+                for m in incoming {
+                    slot.world.receive(m);
+                }
+            }
+        }
+        let gvt = self.gvt.load();
+        self.contribute(&mut slot, gvt);
+        let world = &mut slot.world;
+        let acted = if world.wants_to_act(gvt) {
+            let lvt = world.lvt();
+            match catch_unwind(AssertUnwindSafe(|| world.act(gvt))) {
+                Ok(out) => {
+                    for m in out {
+                        self.send(m, local);
+                    }
+                    true
+                }
+                Err(p) => {
+                    self.fail(ExecError::WorldPanicked {
+                        world: w as WorldId,
+                        step: lvt,
+                        message: panic_message(&*p),
+                    });
+                    return false;
+                }
+            }
+        } else {
+            false
+        };
+        let bound = world.bound();
+        if bound > self.published[w].load() {
+            self.version.fetch_add(1);
+        }
+        self.published[w].store(bound);
+        if acted && world.wants_to_act(self.gvt.load()) {
+            self.schedule(w, local);
+        }
+        acted
+    }
+
+    /// Hands the world's states of the steps below `gvt` not yet handed over to the frame
+    /// assembly, then fossil-collects its logs.
+    fn contribute(&self, slot: &mut Slot<M>, gvt: Step) {
+        let last = (gvt - 1).min(self.target);
+        if slot.contributed >= last {
+            return;
+        }
+        let mut assembly = self.assembly.lock();
+        for t in slot.contributed + 1..=last {
+            let part = assembly.partial.entry(t).or_insert_with(|| Partial {
+                worlds: 0,
+                states: Vec::new(),
+                events: Vec::new(),
+            });
+            part.worlds += 1;
+            part.states.extend(slot.world.state_at(t).cloned());
+            part.events.extend(slot.world.events_at(t - 1).copied());
+            slot.world.note_committed(t);
+        }
+        slot.contributed = last;
+        slot.world.sample_log_bytes();
+        slot.world.fossil_collect(last);
+        let n = self.worlds.len();
+        let mut done = Vec::new();
+        loop {
+            let next = assembly.next;
+            match assembly.partial.get(&next) {
+                Some(p) if p.worlds == n => {
+                    let p = assembly.partial.remove(&next).expect("present");
+                    done.push((next, p));
+                    assembly.next += 1;
+                }
+                _ => break,
+            }
+        }
+        if done.is_empty() {
+            return;
+        }
+        // Frames are finished and queued under the assembly lock, so they reach the output
+        // stage in step order whichever thread completes them.
+        let mut frames = Vec::with_capacity(done.len());
+        for (t, mut p) in done {
+            p.states.sort_by_key(|s| M::id(s));
+            p.events.sort();
+            let frame = Frame {
+                step: t,
+                hash: canonical_hash::<M>(p.states.iter()),
+                bodies: p.states.len(),
+                events: p.events,
+            };
+            let states = self.wanted.wants(t, frame.hash).then_some(p.states);
+            frames.push((frame, states));
+        }
+        let last_step = frames.last().map_or(0, |f| f.0.step);
+        self.out.lock().pending.extend(frames);
+        drop(assembly);
+        self.committed.store(last_step);
+        if last_step >= self.target {
+            self.status.store(DONE);
+        }
+    }
+
+    /// A GVT round from the published bounds, without stopping any world: a snapshot is
+    /// accepted only if no bound was raised while it was read (SPEC.md §K7). Returns whether
+    /// GVT advanced (every world is then scheduled, to commit and fossil-collect).
     fn gvt_round(&self, local: &Worker<usize>) -> bool {
         if self.gvt_round.swap(1) == 1 {
             return false;
         }
-        let advanced = self.gvt_round_locked(local);
+        let mut advanced = false;
+        for _ in 0..4 {
+            let before = self.version.load();
+            let mut least = self.target + 1;
+            for w in 0..self.worlds.len() {
+                least = least.min(self.published[w].load()).min(self.inbox_min[w].load());
+            }
+            if self.version.load() != before {
+                continue;
+            }
+            let old = self.gvt.load();
+            if least > old {
+                self.gvt.store(least);
+                self.out.lock().gvt_advances += 1;
+                advanced = true;
+            }
+            break;
+        }
         self.gvt_round.store(0);
+        if advanced {
+            for w in 0..self.worlds.len() {
+                self.schedule(w, local);
+            }
+        }
         advanced
     }
 
-    fn gvt_round_locked(&self, local: &Worker<usize>) -> bool {
-        let mut worlds: Vec<_> = self.worlds.iter().map(|m| m.lock()).collect();
+    /// Under the full cut (every world lock, then every inbox lock): fails the run if no
+    /// world can act, no message is pending and frames are missing (a kernel bug).
+    fn check_stall(&self) {
+        let worlds: Vec<_> = self.worlds.iter().map(|m| m.lock()).collect();
         let inboxes: Vec<_> = self.inboxes.iter().map(|m| m.lock()).collect();
-        let old = self.gvt.load();
-        let end = self.target + 1;
-        let new = worlds
-            .iter()
-            .map(|w| w.bound())
-            .chain(inboxes.iter().flat_map(|i| i.iter().map(|m| m.affects())))
-            .min()
-            .unwrap_or(end)
-            .min(end);
-        if new <= old {
-            let pending = inboxes.iter().any(|i| !i.is_empty());
-            let can_act = worlds.iter().any(|w| w.wants_to_act(old));
-            if !pending && !can_act && self.committed.load() < self.target {
-                drop(inboxes);
-                drop(worlds);
-                self.fail(ExecError::Stalled { gvt: old });
-            }
-            return false;
+        let gvt = self.gvt.load();
+        let pending = inboxes.iter().any(|i| !i.is_empty());
+        let can_act = worlds.iter().any(|s| s.world.wants_to_act(gvt));
+        let to_commit = worlds.iter().any(|s| s.contributed < (gvt - 1).min(self.target));
+        let bounds = worlds.iter().map(|s| s.world.bound()).min().unwrap_or(Step::MAX);
+        if !pending && !can_act && !to_commit && bounds <= gvt && self.committed.load() < self.target
+        {
+            drop(inboxes);
+            drop(worlds);
+            self.fail(ExecError::Stalled { gvt });
         }
-        let mut out = self.out.lock();
-        let mut committed = self.committed.load();
-        while committed + 1 < new {
-            let t = committed + 1;
-            let mut all: Vec<&M::State> = worlds.iter().flat_map(|w| w.state_at(t)).collect();
-            all.sort_by_key(|s| M::id(s));
-            let mut events: Vec<Event> = worlds
-                .iter()
-                .flat_map(|w| w.events_at(t - 1))
-                .copied()
-                .collect();
-            events.sort();
-            let frame = Frame {
-                step: t,
-                hash: canonical_hash::<M>(all.iter().copied()),
-                bodies: all.len(),
-                events,
-            };
-            let states = self
-                .wanted
-                .wants(t, frame.hash)
-                .then(|| all.iter().map(|s| (*s).clone()).collect());
-            drop(all);
-            for w in worlds.iter_mut() {
-                w.note_committed(t);
-            }
-            committed = t;
-            out.pending.push_back((frame, states));
-        }
-        out.gvt_advances += 1;
-        for w in worlds.iter_mut() {
-            w.sample_log_bytes();
-            w.fossil_collect(new - 1);
-        }
-        self.gvt.store(new);
-        self.committed.store(committed);
-        if committed >= self.target {
-            self.status.store(DONE);
-        }
-        drop(out);
-        drop(inboxes);
-        drop(worlds);
-        for w in 0..self.worlds.len() {
-            self.schedule(w, local);
-        }
-        true
     }
 
     fn find_task(
@@ -301,23 +405,21 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     fn worker_loop(&self, me: usize, local: Worker<usize>, stealers: Arc<Vec<Stealer<usize>>>) {
         let mut times = ThreadTimes::default();
         let mut spins = 0u32;
-        let gvt_every = (2 * self.worlds.len()).max(4) as u64;
         while self.status.load() == RUNNING {
             let t0 = Instant::now();
             match self.find_task(&local, &stealers, me, &mut times.steals) {
                 Some(w) => {
                     spins = 0;
-                    if self.run_world(w, &local) {
+                    let acted = self.run_world(w, &local);
+                    if acted {
                         times.actions += 1;
                         times.busy_seconds += t0.elapsed().as_secs_f64();
-                        if times.actions % gvt_every == 0 {
-                            let g0 = Instant::now();
-                            self.gvt_round(&local);
-                            times.gvt_seconds += g0.elapsed().as_secs_f64();
-                        }
                     } else {
                         times.idle_seconds += t0.elapsed().as_secs_f64();
                     }
+                    let g0 = Instant::now();
+                    self.gvt_round(&local);
+                    times.gvt_seconds += g0.elapsed().as_secs_f64();
                 }
                 None => {
                     let g0 = Instant::now();
@@ -327,6 +429,9 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
                         let i0 = Instant::now();
                         F::pause(spins);
                         spins = spins.saturating_add(1);
+                        if spins % STALL_CHECK_SPINS == 0 {
+                            self.check_stall();
+                        }
                         times.idle_seconds += i0.elapsed().as_secs_f64();
                     }
                 }
@@ -411,9 +516,20 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
             inboxes[m.dst_world as usize].push(m);
         }
     }
+    let published = worlds.iter().map(|w| F::Atomic::new(w.bound())).collect();
+    let inbox_min = inboxes
+        .iter()
+        .map(|i| F::Atomic::new(i.iter().map(|m| m.affects()).min().unwrap_or(u64::MAX)))
+        .collect();
     let shared = Arc::new(Shared::<M, F> {
-        worlds: worlds.into_iter().map(F::Mutex::new).collect(),
+        worlds: worlds
+            .into_iter()
+            .map(|world| F::Mutex::new(Slot { world, contributed: 0 }))
+            .collect(),
         inboxes: inboxes.into_iter().map(F::Mutex::new).collect(),
+        published,
+        inbox_min,
+        version: F::Atomic::new(0),
         scheduled: (0..n).map(|_| F::Atomic::new(1)).collect(),
         injector: Injector::new(),
         gvt: F::Atomic::new(1),
@@ -422,6 +538,10 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         status: F::Atomic::new(if steps == 0 { DONE } else { RUNNING }),
         target: steps,
         wanted,
+        assembly: F::Mutex::new(Assembly {
+            partial: BTreeMap::new(),
+            next: 1,
+        }),
         out: F::Mutex::new(Output::default()),
         error: F::Mutex::new(None),
     });
@@ -475,7 +595,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     let world_counters = shared
         .worlds
         .iter()
-        .map(|w| w.lock().counters().clone())
+        .map(|w| w.lock().world.counters().clone())
         .collect();
     let counters = Counters::from_worlds(world_counters, out.gvt_advances, shared.gvt.load());
     Ok(ThreadedReport {
