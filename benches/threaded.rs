@@ -1,7 +1,7 @@
 //! Threaded executor against the reference, side by side in one run: `falling-cubes`
 //! (`TH_CUBES`, default 8000) for `TH_STEPS` steps (default 600 = 10 simulated seconds),
 //! the threaded executor on `TH_THREADS` threads (default 2) with each world count of
-//! `TH_WORLDS` (default "2,4,8"), `cell` mode, window `TH_WINDOW` (default 16). Prints wall
+//! `TH_WORLDS` (default "2,4,8") and each window of `TH_WINDOW` (default "16"), `cell` mode. Prints wall
 //! times, the speed-up over the reference, efficiency, rollbacks and the threads' busy,
 //! GVT and idle time, and checks every committed hash against the reference's.
 //!
@@ -32,7 +32,10 @@ fn main() {
     let cubes: usize = env("TH_CUBES", "8000", "64").parse().expect("TH_CUBES");
     let steps: u64 = env("TH_STEPS", "600", "10").parse().expect("TH_STEPS");
     let threads: usize = env("TH_THREADS", "2", "2").parse().expect("TH_THREADS");
-    let window: u64 = env("TH_WINDOW", "16", "8").parse().expect("TH_WINDOW");
+    let windows: Vec<u64> = env("TH_WINDOW", "16", "8")
+        .split(',')
+        .map(|w| w.trim().parse().expect("TH_WINDOW"))
+        .collect();
     let worlds: Vec<usize> = env("TH_WORLDS", "2,4,8", "2,4")
         .split(',')
         .map(|w| w.trim().parse().expect("TH_WORLDS"))
@@ -47,7 +50,10 @@ fn main() {
         scene.grid().dims,
         cubes as f64 * steps as f64 / tr
     );
-    for &w in &worlds {
+    for (&w, &window) in worlds
+        .iter()
+        .flat_map(|w| windows.iter().map(move |v| (w, v)))
+    {
         let config = KernelConfig::new(w)
             .mode(RollbackMode::Cell)
             .window(window)

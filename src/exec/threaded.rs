@@ -205,7 +205,11 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             let mut inbox = self.inboxes[w].lock();
             if !inbox.is_empty() {
                 let incoming = std::mem::take(&mut *inbox);
-                let least = incoming.iter().map(|m| m.affects()).min().unwrap_or(u64::MAX);
+                let least = incoming
+                    .iter()
+                    .map(|m| m.affects())
+                    .min()
+                    .unwrap_or(u64::MAX);
                 // The messages move from the inbox's bound to the world's: lower the world's
                 // first, then (a raise) empty the inbox's.
                 self.lower(&self.published[w], least);
@@ -326,7 +330,9 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             let before = self.version.load();
             let mut least = self.target + 1;
             for w in 0..self.worlds.len() {
-                least = least.min(self.published[w].load()).min(self.inbox_min[w].load());
+                least = least
+                    .min(self.published[w].load())
+                    .min(self.inbox_min[w].load());
             }
             if self.version.load() != before {
                 continue;
@@ -356,9 +362,19 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         let gvt = self.gvt.load();
         let pending = inboxes.iter().any(|i| !i.is_empty());
         let can_act = worlds.iter().any(|s| s.world.wants_to_act(gvt));
-        let to_commit = worlds.iter().any(|s| s.contributed < (gvt - 1).min(self.target));
-        let bounds = worlds.iter().map(|s| s.world.bound()).min().unwrap_or(Step::MAX);
-        if !pending && !can_act && !to_commit && bounds <= gvt && self.committed.load() < self.target
+        let to_commit = worlds
+            .iter()
+            .any(|s| s.contributed < (gvt - 1).min(self.target));
+        let bounds = worlds
+            .iter()
+            .map(|s| s.world.bound())
+            .min()
+            .unwrap_or(Step::MAX);
+        if !pending
+            && !can_act
+            && !to_commit
+            && bounds <= gvt
+            && self.committed.load() < self.target
         {
             drop(inboxes);
             drop(worlds);
@@ -524,7 +540,12 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     let shared = Arc::new(Shared::<M, F> {
         worlds: worlds
             .into_iter()
-            .map(|world| F::Mutex::new(Slot { world, contributed: 0 }))
+            .map(|world| {
+                F::Mutex::new(Slot {
+                    world,
+                    contributed: 0,
+                })
+            })
             .collect(),
         inboxes: inboxes.into_iter().map(F::Mutex::new).collect(),
         published,

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-/// How a world repairs a straggler (SPEC-kernel.md §Rollback modes).
+/// How a world repairs a straggler (SPEC.md §Rollback modes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum RollbackMode {

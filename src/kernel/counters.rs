@@ -1,4 +1,4 @@
-//! Counters per world and in total (SPEC-kernel.md §Counters).
+//! Counters per world and in total (SPEC.md §Counters).
 //!
 //! Formulas:
 //! - `efficiency = cells_committed / cells_computed` — of all cell computations (first

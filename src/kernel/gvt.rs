@@ -1,4 +1,4 @@
-//! Global virtual time (SPEC-kernel.md §GVT).
+//! Global virtual time (SPEC.md §GVT).
 //!
 //! GVT is the smallest step whose state may still change. It is the minimum of
 //! - for every world, its local bound: `min(LVT, earliest dirty step) + 1` (optimistic

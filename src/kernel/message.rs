@@ -6,7 +6,7 @@
 //! at `step`, in cells of the destination world. A positive message is identified by
 //! (kind, step, source cell, destination world, sequence number); its anti-message carries
 //! the same identity and no bodies. Inputs are not messages between worlds here (see
-//! SPEC-kernel.md §Inputs).
+//! SPEC.md §Inputs).
 
 use super::partition::WorldId;
 use crate::model::{BodyId, Step};

@@ -2,7 +2,7 @@
 //! checkpoint logs), the GVT rule and counters. Pure and single-threaded: no threads, no
 //! I/O, no clocks. Executors (`crate::exec`) drive worlds and carry messages between them.
 //!
-//! The contract is in SPEC-kernel.md (to be merged into SPEC.md): the state of a cell at a
+//! The contract is in SPEC.md §9: the state of a cell at a
 //! step is the unit of logs, ghosts and comparison; messages are applied in a total order
 //! (never arrival order); committed steps are bit-identical to the reference run whatever
 //! the partition, rollback mode, window and delivery order.

@@ -1,4 +1,4 @@
-//! A world: one logical process owning a territory of cells (SPEC-kernel.md §World).
+//! A world: one logical process owning a territory of cells (SPEC.md §World).
 //!
 //! Pure and single-threaded. An executor hands it messages ([`World::receive`]), lets it act
 //! ([`World::act`], which returns the messages it sends), asks for its GVT bound
