@@ -5,11 +5,21 @@
 //! times, the speed-up over the reference, efficiency, rollbacks and the threads' busy,
 //! GVT and idle time, and checks every committed hash against the reference's.
 //!
-//! Wall times on a shared 2-core machine are noisy: compare within one run only.
+//! It also times rapier3d (built with `parallel`) on the same bodies on 1 and `TH_THREADS`
+//! rayon threads. Wall times on a shared 2-core machine are noisy: compare within one run
+//! only.
 //!
 //! Run: `cargo bench --bench threaded`; `cargo bench --bench threaded -- --test` (or
 //! `cargo test --benches`) runs a tiny version.
 
+#[allow(dead_code)]
+mod common;
+#[allow(dead_code)]
+#[path = "common/rapier_world.rs"]
+mod rapier_world;
+
+use common::Footprint;
+use rapier_world::RapierWorld;
 use soda::exec::threaded::run_threaded;
 use soda::kernel::{KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
@@ -49,6 +59,24 @@ fn main() {
         "threaded: falling-cubes {cubes}, {steps} steps, grid {:?}; reference {tr:.2} s ({:.0} body-steps/s)",
         scene.grid().dims,
         cubes as f64 * steps as f64 / tr
+    );
+    let rapier = |threads: usize| {
+        let initial = scene.initial_bodies();
+        let footprint = Footprint::of(&initial);
+        let mut world = RapierWorld::new(&scene, &initial, &footprint);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        let t = Instant::now();
+        pool.install(|| (0..steps).for_each(|_| world.step()));
+        t.elapsed().as_secs_f64()
+    };
+    let (r1, r2) = (rapier(1), rapier(threads));
+    println!(
+        "  rapier3d (parallel feature, sleeping on): 1 thread {r1:.2} s, {threads} threads {r2:.2} s = {:.2}x its 1-thread speed; SODA's reference is {:.1}x Rapier's 1-thread time",
+        r1 / r2,
+        tr / r1
     );
     for (&w, &window) in worlds
         .iter()

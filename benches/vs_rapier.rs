@@ -3,7 +3,8 @@
 //!
 //! Both engines start from the same bodies — `builtin("falling-cubes", Some(n), 0)`, the same
 //! lattice and jitter — and run 600 steps of 1/60 s (10 simulated seconds). Rapier gets its
-//! defaults (`IntegrationParameters::default()`, sleeping on, no `parallel` feature) and a
+//! defaults (`IntegrationParameters::default()`, sleeping on; built with `parallel` but run in
+//! a one-thread rayon pool) and a
 //! ground: a fixed cuboid collider whose top is y = 0, with the scene's ground friction and
 //! restitution; each cube gets the scene's density, friction and restitution.
 //!
@@ -21,12 +22,15 @@
 //! `SODA_BENCH_SIZES=1000,8000` selects the sizes (default both).
 
 mod common;
+#[path = "common/rapier_world.rs"]
+mod rapier_world;
+
+use rapier_world::RapierWorld;
 
 use common::{measure_pile, soda_pile, Footprint, PileBody, PileMetrics};
-use rapier3d::prelude::*;
 use serde::Serialize;
 use soda::frame::EventKind;
-use soda::physics::{Body, Shape};
+use soda::physics::Body;
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 use soda::sim::Simulation;
@@ -159,140 +163,6 @@ fn run_soda(scene: &Scene, steps: u64, check: bool) -> Run {
     }
 }
 
-struct RapierWorld {
-    gravity: Vector<Real>,
-    params: IntegrationParameters,
-    pipeline: PhysicsPipeline,
-    islands: IslandManager,
-    broad_phase: DefaultBroadPhase,
-    narrow_phase: NarrowPhase,
-    bodies: RigidBodySet,
-    colliders: ColliderSet,
-    impulse_joints: ImpulseJointSet,
-    multibody_joints: MultibodyJointSet,
-    ccd: CCDSolver,
-    handles: Vec<RigidBodyHandle>,
-}
-
-impl RapierWorld {
-    fn new(scene: &Scene, initial: &[Body], footprint: &Footprint) -> Self {
-        let mut bodies = RigidBodySet::new();
-        let mut colliders = ColliderSet::new();
-        let ground_y = scene
-            .environment
-            .ground
-            .expect("falling-cubes has a ground");
-        let half = 50.0f32
-            .max(2.0 * footprint.max[0].abs())
-            .max(2.0 * footprint.min[0].abs())
-            .max(2.0 * footprint.max[1].abs())
-            .max(2.0 * footprint.min[1].abs());
-        colliders.insert(
-            ColliderBuilder::cuboid(half, 1.0, half)
-                .translation(vector![0.0, ground_y - 1.0, 0.0])
-                .friction(scene.environment.friction)
-                .restitution(scene.environment.restitution),
-        );
-        let mut handles = Vec::with_capacity(initial.len());
-        for b in initial {
-            let rb = RigidBodyBuilder::dynamic()
-                .pose(Isometry::from_parts(b.position.into(), b.rotation))
-                .linvel(b.linvel)
-                .angvel(b.angvel);
-            let h = bodies.insert(rb);
-            let shape = match b.shape {
-                Shape::Cuboid { half_extents: e } => ColliderBuilder::cuboid(e[0], e[1], e[2]),
-                Shape::Ball { radius } => ColliderBuilder::ball(radius),
-            };
-            colliders.insert_with_parent(
-                shape
-                    .density(b.mass() / b.shape.volume())
-                    .friction(b.friction)
-                    .restitution(b.restitution),
-                h,
-                &mut bodies,
-            );
-            handles.push(h);
-        }
-        let params = IntegrationParameters {
-            dt: scene.dt,
-            ..IntegrationParameters::default()
-        };
-        RapierWorld {
-            gravity: Vector::from(scene.gravity),
-            params,
-            pipeline: PhysicsPipeline::new(),
-            islands: IslandManager::new(),
-            broad_phase: DefaultBroadPhase::new(),
-            narrow_phase: NarrowPhase::new(),
-            bodies,
-            colliders,
-            impulse_joints: ImpulseJointSet::new(),
-            multibody_joints: MultibodyJointSet::new(),
-            ccd: CCDSolver::new(),
-            handles,
-        }
-    }
-
-    fn step(&mut self) {
-        self.pipeline.step(
-            &self.gravity,
-            &self.params,
-            &mut self.islands,
-            &mut self.broad_phase,
-            &mut self.narrow_phase,
-            &mut self.bodies,
-            &mut self.colliders,
-            &mut self.impulse_joints,
-            &mut self.multibody_joints,
-            &mut self.ccd,
-            &(),
-            &(),
-        );
-    }
-
-    /// FNV-1a over the bits of every body's translation and rotation, in insertion order.
-    fn hash(&self) -> u64 {
-        let mut h = 0xcbf2_9ce4_8422_2325u64;
-        for &hd in &self.handles {
-            let p = self.bodies[hd].position();
-            let t = p.translation.vector;
-            let q = p.rotation.coords;
-            for v in [t.x, t.y, t.z, q.x, q.y, q.z, q.w] {
-                for byte in v.to_bits().to_le_bytes() {
-                    h = (h ^ byte as u64).wrapping_mul(0x0100_0000_01b3);
-                }
-            }
-        }
-        h
-    }
-
-    fn pile(&self, initial: &[Body]) -> Vec<PileBody> {
-        self.handles
-            .iter()
-            .zip(initial)
-            .map(|(&hd, b)| {
-                let rb = &self.bodies[hd];
-                PileBody {
-                    shape: b.shape,
-                    position: rb.position().translation.vector,
-                    rotation: rb.position().rotation,
-                    linvel: *rb.linvel(),
-                }
-            })
-            .collect()
-    }
-}
-
-impl RapierWorld {
-    fn asleep(&self) -> usize {
-        self.handles
-            .iter()
-            .filter(|&&h| self.bodies[h].is_sleeping())
-            .count()
-    }
-}
-
 fn run_rapier(
     scene: &Scene,
     initial: &[Body],
@@ -302,15 +172,23 @@ fn run_rapier(
 ) -> Run {
     let mut world = RapierWorld::new(scene, initial, footprint);
     let tracing = first && trace_enabled();
+    // rapier3d is built with its `parallel` feature (for the threaded bench): a one-thread
+    // rayon pool keeps this comparison single-threaded.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a one-thread pool");
     let start = Instant::now();
-    for step in 1..=steps {
-        world.step();
-        if tracing && step % 60 == 0 {
-            let w = start.elapsed().as_secs_f64();
-            let asleep = format!(", {} asleep", world.asleep());
-            trace("Rapier", step, w, &world.pile(initial), footprint, &asleep);
+    pool.install(|| {
+        for step in 1..=steps {
+            world.step();
+            if tracing && step % 60 == 0 {
+                let w = start.elapsed().as_secs_f64();
+                let asleep = format!(", {} asleep", world.asleep());
+                trace("Rapier", step, w, &world.pile(initial), footprint, &asleep);
+            }
         }
-    }
+    });
     let wall = start.elapsed().as_secs_f64();
     let asleep = world.asleep();
     Run {
