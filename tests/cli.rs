@@ -611,3 +611,18 @@ fn verify_rejects_an_unknown_mode_naming_the_allowed_ones() {
         "{err}"
     );
 }
+
+#[test]
+fn threaded_runs_default_to_one_world_per_thread() {
+    let v = json(&with(&[
+        "--json",
+        "--executor",
+        "threaded",
+        "--threads",
+        "3",
+    ]));
+    assert_eq!(v["kernel"]["worlds"], 3);
+    assert_eq!(v["kernel"]["threads"], 3);
+    let v = json(&with(&["--json", "--executor", "virtual"]));
+    assert_eq!(v["kernel"]["worlds"], 4);
+}

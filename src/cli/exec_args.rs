@@ -67,7 +67,9 @@ pub struct ExecutorArgs {
     /// The executor: all three commit bit-identical states.
     #[arg(long, value_enum, default_value = "reference")]
     pub executor: ExecutorArg,
-    /// Number of worlds (logical processes) [default: 4]. Virtual and threaded only.
+    /// Number of worlds (logical processes) [default: the thread count for `threaded`
+    /// (more worlds than threads make idle worlds race ahead and roll back), 4 for
+    /// `virtual`]. Virtual and threaded only.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=4096))]
     pub worlds: Option<u64>,
     /// OS threads of the threaded executor [default: the available cores].
@@ -162,7 +164,12 @@ impl ExecutorArgs {
             })?,
             (None, seed) => ScheduleSpec::Seeded(seed.unwrap_or(0)),
         };
-        let mut kernel = KernelConfig::new(self.worlds.unwrap_or(4) as usize)
+        let threads = self.threads.map_or_else(default_threads, |t| t as usize);
+        let default_worlds = match executor {
+            ExecutorKind::Threaded => threads,
+            _ => 4,
+        };
+        let mut kernel = KernelConfig::new(self.worlds.map_or(default_worlds, |w| w as usize))
             .mode(self.mode.map_or(RollbackMode::Cell, Into::into))
             .window(self.window.unwrap_or(16))
             .partition(self.partition.map_or(PartitionKind::Blocks, Into::into))
@@ -173,7 +180,7 @@ impl ExecutorArgs {
         Ok(RunOptions {
             executor,
             kernel,
-            threads: self.threads.map_or_else(default_threads, |t| t as usize),
+            threads,
         })
     }
 }
