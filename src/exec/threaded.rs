@@ -116,6 +116,7 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     gvt_round: F::Atomic,
     status: F::Atomic,
     target: Step,
+    optimistic: bool,
     wanted: StatesWanted,
     assembly: F::Mutex<Assembly<M::State>>,
     out: F::Mutex<Output<M::State>>,
@@ -157,6 +158,10 @@ impl<S> Default for Output<S> {
         }
     }
 }
+
+/// How many steps a world may compute ahead of the slowest other world before it lets
+/// laggards run first (optimistic modes).
+const LEAD: Step = 0;
 
 /// Consecutive idle pauses after which a thread checks, under the full cut, whether the run
 /// has stalled (a kernel bug) rather than waiting for ever.
@@ -224,6 +229,13 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         let gvt = self.gvt.load();
         self.contribute(&mut slot, gvt);
         let world = &mut slot.world;
+        if self.postpone(w, world) {
+            self.published[w].store(world.bound());
+            drop(slot);
+            self.injector.push(w);
+            F::pause(0);
+            return false;
+        }
         let acted = if world.wants_to_act(gvt) {
             let lvt = world.lvt();
             match catch_unwind(AssertUnwindSafe(|| world.act(gvt))) {
@@ -254,6 +266,27 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             self.schedule(w, local);
         }
         acted
+    }
+
+    /// Whether world `w` should let laggards run first: in the optimistic modes, a world
+    /// that would only compute forward while it is more than [`LEAD`] steps ahead of the
+    /// slowest other world would compute with borders that are probably still to change.
+    /// The slowest world is never postponed, so the run always progresses. Its flag stays
+    /// set: the task goes back to the shared queue.
+    fn postpone(&self, w: usize, world: &World<M>) -> bool {
+        if !self.optimistic || !world.only_advances() || self.worlds.len() <= 1 {
+            return false;
+        }
+        let slowest = (0..self.worlds.len())
+            .filter(|&v| v != w)
+            .map(|v| self.published[v].load())
+            .min()
+            .unwrap_or(Step::MAX);
+        let postpone = world.lvt() + 1 > slowest.saturating_add(LEAD);
+        if postpone {
+            self.scheduled[w].store(1);
+        }
+        postpone
     }
 
     /// Hands the world's states of the steps below `gvt` not yet handed over to the frame
@@ -558,6 +591,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         gvt_round: F::Atomic::new(0),
         status: F::Atomic::new(if steps == 0 { DONE } else { RUNNING }),
         target: steps,
+        optimistic: config.mode != crate::kernel::RollbackMode::Conservative,
         wanted,
         assembly: F::Mutex::new(Assembly {
             partial: BTreeMap::new(),

@@ -358,6 +358,12 @@ impl<M: CellModel> World<M> {
         !self.inbox.is_empty()
     }
 
+    /// Whether its next action would only compute forward (no message to apply, no cell to
+    /// re-execute): the speculative kind of work an executor may postpone.
+    pub fn only_advances(&self) -> bool {
+        self.inbox.is_empty() && self.dirty.is_empty()
+    }
+
     /// Whether acting now may do something. In conservative mode an action may still find
     /// every cell waiting for its neighbours; after such an idle action the world does not
     /// want to act again until it receives a message or GVT changes.
