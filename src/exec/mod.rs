@@ -5,3 +5,62 @@ pub mod reference;
 pub mod sync;
 pub mod threaded;
 pub mod virtual_exec;
+
+use crate::frame::Event;
+use crate::grid::Grid;
+use crate::kernel::{KernelConfig, Partition, World, WorldId};
+use crate::model::CellModel;
+use crate::state::CellStates;
+use std::sync::Arc;
+
+/// The worlds of a Time Warp run, as both kernel executors start them.
+pub(crate) struct Worlds<M: CellModel> {
+    /// The grid, shared with every world.
+    pub grid: Arc<Grid>,
+    /// The cell → world map (from `config.partition`, over the initial positions).
+    pub partition: Arc<Partition>,
+    /// One world per territory, ascending id, at step 0.
+    pub worlds: Vec<World<M>>,
+    /// `LeftDomain` events of initial states outside the grid (they are dropped).
+    pub events: Vec<Event>,
+}
+
+/// Bins `initial`, partitions the grid with `config` (at least one world) and builds every
+/// world at step 0.
+pub(crate) fn build_worlds<M: CellModel>(
+    model: M,
+    grid: Grid,
+    initial: Vec<M::State>,
+    config: &KernelConfig,
+) -> Worlds<M> {
+    let positions: Vec<[f32; 3]> = initial.iter().map(M::position).collect();
+    let mut events = Vec::new();
+    let state = CellStates::binned::<M>(&grid, initial, 0, &mut events);
+    let partition = Arc::new(Partition::build(
+        &config.partition,
+        &grid,
+        config.worlds.max(1),
+        &positions,
+        config.partition_seed,
+    ));
+    let model = Arc::new(model);
+    let grid = Arc::new(grid);
+    let worlds = (0..partition.worlds() as WorldId)
+        .map(|w| {
+            World::new(
+                w,
+                model.clone(),
+                grid.clone(),
+                partition.clone(),
+                config,
+                &state,
+            )
+        })
+        .collect();
+    Worlds {
+        grid,
+        partition,
+        worlds,
+        events,
+    }
+}

@@ -23,11 +23,11 @@ use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::kernel::counters::Counters;
 use crate::kernel::message::Message;
-use crate::kernel::partition::{Partition, WorldId};
+use crate::kernel::partition::WorldId;
 use crate::kernel::world::World;
 use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
-use crate::state::{canonical_hash, CellStates};
+use crate::state::canonical_hash;
 use crossbeam_deque::{Injector, Steal, Stealer, Worker};
 use std::collections::{BTreeMap, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -63,11 +63,11 @@ pub enum ExecError {
 /// nothing here reaches a hash).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct ThreadTimes {
-    /// Seconds inside world actions.
+    /// Seconds inside world turns that computed something.
     pub busy_seconds: f64,
-    /// Seconds inside GVT rounds (including waiting for the cut).
+    /// Seconds inside GVT rounds (reading the published bounds).
     pub gvt_seconds: f64,
-    /// Seconds with no task (waiting for work).
+    /// Seconds with no task, or in turns that computed nothing.
     pub idle_seconds: f64,
     /// Number of world actions.
     pub actions: u64,
@@ -532,32 +532,12 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
 ) -> Result<ThreadedReport, ExecError> {
     let start = Instant::now();
     let threads = threads.max(1);
-    let positions: Vec<[f32; 3]> = initial.iter().map(M::position).collect();
-    let mut initial_events = Vec::new();
-    let state = CellStates::binned::<M>(&grid, initial, 0, &mut initial_events);
-    let partition = Arc::new(Partition::build(
-        &config.partition,
-        &grid,
-        config.worlds.max(1),
-        &positions,
-        config.partition_seed,
-    ));
-    let model = Arc::new(model);
-    let grid = Arc::new(grid);
-    let n = partition.worlds();
-    let mut worlds: Vec<World<M>> = (0..n as WorldId)
-        .map(|w| {
-            World::new(
-                w,
-                model.clone(),
-                grid.clone(),
-                partition.clone(),
-                config,
-                &state,
-            )
-        })
-        .collect();
-    drop(state);
+    let super::Worlds {
+        mut worlds,
+        events: initial_events,
+        ..
+    } = super::build_worlds(model, grid, initial, config);
+    let n = worlds.len();
     let mut inboxes: Vec<Vec<Message<M::State>>> = (0..n).map(|_| Vec::new()).collect();
     for w in &mut worlds {
         w.set_end(steps);

@@ -47,7 +47,7 @@ use crate::kernel::message::{Input, Message, MessageKind, Sign};
 use crate::kernel::partition::{Partition, WorldId};
 use crate::kernel::world::World;
 use crate::model::{CellModel, Step};
-use crate::state::{canonical_hash, CellStates};
+use crate::state::canonical_hash;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeMap;
@@ -173,30 +173,12 @@ impl<M: CellModel> VirtualRun<M> {
         config: &KernelConfig,
     ) -> (Self, Vec<Event>) {
         assert!(config.worlds >= 1, "at least one world");
-        let positions: Vec<[f32; 3]> = initial.iter().map(M::position).collect();
-        let mut events = Vec::new();
-        let state = CellStates::binned::<M>(&grid, initial, 0, &mut events);
-        let partition = Arc::new(Partition::build(
-            &config.partition,
-            &grid,
-            config.worlds,
-            &positions,
-            config.partition_seed,
-        ));
-        let model = Arc::new(model);
-        let grid = Arc::new(grid);
-        let mut worlds: Vec<World<M>> = (0..partition.worlds() as WorldId)
-            .map(|w| {
-                World::new(
-                    w,
-                    model.clone(),
-                    grid.clone(),
-                    partition.clone(),
-                    config,
-                    &state,
-                )
-            })
-            .collect();
+        let super::Worlds {
+            grid,
+            partition,
+            mut worlds,
+            events,
+        } = super::build_worlds(model, grid, initial, config);
         let mut run = VirtualRun {
             config: config.clone(),
             inputs: 0,
