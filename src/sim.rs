@@ -9,7 +9,7 @@ use crate::exec::virtual_exec::VirtualRun;
 use crate::frame::{Event, EventKind, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::hash::hex;
-use crate::kernel::{Counters, KernelConfig};
+use crate::kernel::{Counters, KernelConfig, RunTrace};
 use crate::physics::metrics::{
     environment_penetration, kinetic_energy, max_speed, pair_penetration, potential_energy,
 };
@@ -119,6 +119,10 @@ pub struct RunReport {
     /// The Time Warp side of the run (virtual and threaded executors only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub kernel: Option<KernelReport>,
+    /// The run trace, when `options.kernel.trace` was on (virtual and threaded executors);
+    /// written separately (`soda run --trace`), never part of the report's JSON.
+    #[serde(skip)]
+    pub trace: Option<RunTrace>,
 }
 
 /// Which executor runs a scene (DESIGN.md §5): all three commit the same bits.
@@ -215,6 +219,7 @@ pub fn run_scene(
         .filter(|b| grid.cell_of(b.position).is_some())
         .count();
     let initial_events;
+    let mut trace = None;
     let start = Instant::now();
     let mut on_frame = |f: &Frame, states: Option<&[&Body]>| {
         for e in &f.events {
@@ -258,6 +263,9 @@ pub fn run_scene(
             initial_events = events;
             run.run_with_states(steps, &want, |f, s| on_frame(&f, s));
             let counters = run.counters();
+            if options.kernel.trace {
+                trace = Some(run.take_trace());
+            }
             Some(kernel_report(
                 options,
                 1,
@@ -282,6 +290,7 @@ pub fn run_scene(
                 &mut on_frame,
             )?;
             initial_events = report.initial_events;
+            trace = report.trace;
             Some(kernel_report(
                 options,
                 report.threads,
@@ -321,6 +330,7 @@ pub fn run_scene(
         left_domain_events: left,
         last,
         kernel,
+        trace,
     })
 }
 
@@ -426,6 +436,7 @@ impl Simulation {
             left_domain_events: left,
             last,
             kernel: None,
+            trace: None,
         }
     }
 }

@@ -626,3 +626,122 @@ fn threaded_runs_default_to_one_world_per_thread() {
     let v = json(&with(&["--json", "--executor", "virtual"]));
     assert_eq!(v["kernel"]["worlds"], 4);
 }
+
+#[test]
+fn csv_appends_one_row_per_run_under_one_header() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("runs.csv");
+    let csv_s = csv.to_str().unwrap();
+    let base = ["run", "--objects", "40", "--steps", "12", "--csv", csv_s];
+    ok(&base);
+    let virt = [
+        &base[..],
+        &[
+            "--executor",
+            "virtual",
+            "--worlds",
+            "3",
+            "--schedule-seed",
+            "2",
+        ],
+    ]
+    .concat();
+    ok(&virt);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 3, "{text}");
+    let header: Vec<&str> = lines[0].split(',').collect();
+    for col in [
+        "scene",
+        "executor",
+        "worlds",
+        "threads",
+        "mode",
+        "window",
+        "partition",
+        "steps",
+        "wall_seconds",
+        "hash",
+        "cells_computed",
+        "cells_committed",
+        "cells_rolled_back",
+        "efficiency",
+    ] {
+        assert!(header.contains(&col), "column {col} in {header:?}");
+    }
+    let row = |i: usize| -> Vec<&str> { lines[i].split(',').collect() };
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    assert_eq!(row(1)[col("executor")], "reference");
+    assert_eq!(row(2)[col("executor")], "virtual");
+    assert_eq!(row(2)[col("worlds")], "3");
+    assert_eq!(row(1)[col("hash")], row(2)[col("hash")]);
+    let n = |r: &Vec<&str>, name: &str| r[col(name)].parse::<u64>().unwrap();
+    let v = row(2);
+    assert_eq!(
+        n(&v, "cells_computed"),
+        n(&v, "cells_committed") + n(&v, "cells_rolled_back")
+    );
+}
+
+#[test]
+fn csv_with_another_header_is_refused_and_kept() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("other.csv");
+    std::fs::write(&csv, "a,b\n1,2\n").unwrap();
+    let err = fails(&[
+        "run",
+        "--objects",
+        "8",
+        "--steps",
+        "2",
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("other columns") && err.contains("new file"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&csv).unwrap(), "a,b\n1,2\n");
+}
+
+#[test]
+fn trace_and_counters_files_are_written_as_json() {
+    let dir = tempfile::tempdir().unwrap();
+    let trace = dir.path().join("trace.json");
+    let counters = dir.path().join("counters.json");
+    let out = ok(&[
+        "run",
+        "--objects",
+        "60",
+        "--steps",
+        "20",
+        "--executor",
+        "virtual",
+        "--worlds",
+        "4",
+        "--schedule-seed",
+        "5",
+        "--trace",
+        trace.to_str().unwrap(),
+        "--counters",
+        counters.to_str().unwrap(),
+    ]);
+    let t: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&trace).unwrap()).unwrap();
+    assert_eq!(t["worlds"], 4);
+    assert!(!t["lvt"].as_array().unwrap().is_empty());
+    assert!(!t["gvt"].as_array().unwrap().is_empty());
+    let c: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&counters).unwrap()).unwrap();
+    assert_eq!(c["hash"].as_str().unwrap(), summary_hash(&out));
+    assert_eq!(
+        c["kernel"]["counters"]["worlds"].as_array().unwrap().len(),
+        4
+    );
+}
+
+#[test]
+fn trace_on_the_reference_executor_names_the_fix() {
+    let err = fails(&["run", "--steps", "2", "--trace", "t.json"]);
+    assert!(err.contains("--executor virtual"), "{err}");
+}

@@ -9,6 +9,7 @@ mod record;
 mod run;
 mod scenes;
 mod source;
+mod table;
 mod verify;
 
 use clap::{Parser, Subcommand};

@@ -4,7 +4,7 @@ use super::exec_args::ExecutorArgs;
 use super::output::print;
 use super::record::Recorder;
 use super::source::{Origin, SceneArgs};
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::frame::StatesWanted;
@@ -61,11 +61,37 @@ pub struct OutputArgs {
     /// Print the run report as JSON on stdout (with the final `hash`) instead of the summary.
     #[arg(long)]
     pub json: bool,
+
+    /// Write the run report with every kernel counter (per world and in total) as JSON to
+    /// FILE (the same document as --json, which prints it instead).
+    #[arg(long, value_name = "FILE")]
+    pub counters: Option<PathBuf>,
+
+    /// Append one row for this run to the CSV file FILE (a header first if the file is new):
+    /// scene, executor, worlds, threads, mode, window, partition, steps, wall time, hash and
+    /// every kernel counter (SPEC.md §K9).
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+
+    /// Record a trace (each world's LVT over wall time, every rollback, GVT advances,
+    /// messages per step) and write it as JSON to FILE; `soda plot FILE` draws it.
+    /// Virtual and threaded executors only.
+    #[arg(long, value_name = "FILE")]
+    pub trace: Option<PathBuf>,
 }
 
 /// Runs the command.
 pub fn run(args: &RunArgs) -> Result<()> {
-    let options = args.executor.options()?;
+    let mut options = args.executor.options()?;
+    if args.output.trace.is_some() {
+        if options.executor == soda::sim::ExecutorKind::Reference {
+            bail!(
+                "--trace records the Time Warp kernel's worlds, and the reference executor has \
+                 none; add --executor virtual or --executor threaded"
+            );
+        }
+        options.kernel.trace = true;
+    }
     let (scene, origin) = args.scene.load()?;
     let initial_bodies = scene.bodies.len();
     let last = args.steps;
@@ -98,6 +124,19 @@ pub fn run(args: &RunArgs) -> Result<()> {
     .with_context(|| format!("the {} executor failed", options.executor.name()))?;
     progress.finish_and_clear();
     let recorded = recorder.map(Recorder::finish).transpose()?;
+    if let Some(path) = &args.output.counters {
+        let text = serde_json::to_string_pretty(&report).context("cannot format the report")?;
+        std::fs::write(path, text + "\n")
+            .with_context(|| format!("cannot write the counters to {}", path.display()))?;
+    }
+    if let Some(path) = &args.output.csv {
+        super::table::append_run_row(path, &report, initial_bodies)?;
+    }
+    if let (Some(path), Some(trace)) = (&args.output.trace, &report.trace) {
+        let text = serde_json::to_string(trace).context("cannot format the trace")?;
+        std::fs::write(path, text + "\n")
+            .with_context(|| format!("cannot write the trace to {}", path.display()))?;
+    }
     if args.output.json {
         let text = serde_json::to_string_pretty(&report).context("cannot format the report")?;
         print(&(text + "\n"))

@@ -8,6 +8,7 @@ pub mod virtual_exec;
 
 use crate::frame::Event;
 use crate::grid::Grid;
+use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::{KernelConfig, Partition, World, WorldId};
 use crate::model::CellModel;
 use crate::state::CellStates;
@@ -47,14 +48,16 @@ pub(crate) fn build_worlds<M: CellModel>(
     let grid = Arc::new(grid);
     let worlds = (0..partition.worlds() as WorldId)
         .map(|w| {
-            World::new(
+            let mut world = World::new(
                 w,
                 model.clone(),
                 grid.clone(),
                 partition.clone(),
                 config,
                 &state,
-            )
+            );
+            world.set_recording(config.trace);
+            world
         })
         .collect();
     Worlds {
@@ -63,4 +66,18 @@ pub(crate) fn build_worlds<M: CellModel>(
         worlds,
         events,
     }
+}
+
+/// Merges the worlds' trace parts with the executor's GVT samples into a run trace.
+pub(crate) fn collect_trace<M: CellModel>(
+    grid: &Grid,
+    partition: &Partition,
+    worlds: &mut [&mut World<M>],
+    gvt: Vec<GvtSample>,
+) -> RunTrace {
+    let owners = (0..grid.cell_count())
+        .map(|c| partition.owner(c as u32))
+        .collect();
+    let parts = worlds.iter_mut().map(|w| w.take_record()).collect();
+    RunTrace::merge(grid.dims, owners, parts, gvt)
 }

@@ -24,6 +24,7 @@ use crate::grid::Grid;
 use crate::kernel::counters::Counters;
 use crate::kernel::message::Message;
 use crate::kernel::partition::WorldId;
+use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::World;
 use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
@@ -90,6 +91,8 @@ pub struct ThreadedReport {
     pub threads: usize,
     /// `LeftDomain` events of initial states outside the grid.
     pub initial_events: Vec<Event>,
+    /// The run trace, if `KernelConfig::trace` was on (times: seconds since the start).
+    pub trace: Option<RunTrace>,
 }
 
 const RUNNING: u64 = 0;
@@ -121,6 +124,9 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     assembly: F::Mutex<Assembly<M::State>>,
     out: F::Mutex<Output<M::State>>,
     error: F::Mutex<Option<ExecError>>,
+    /// Whether worlds record a trace (`KernelConfig::trace`), and the run's start.
+    trace: bool,
+    started: Instant,
 }
 
 /// A world and the last step it has handed to the frame assembly.
@@ -147,6 +153,7 @@ struct Output<S> {
     pending: VecDeque<(Frame, Option<Vec<S>>)>,
     gvt_advances: u64,
     times: ThreadTimes,
+    gvt_samples: Vec<GvtSample>,
 }
 
 impl<S> Default for Output<S> {
@@ -155,6 +162,7 @@ impl<S> Default for Output<S> {
             pending: VecDeque::new(),
             gvt_advances: 0,
             times: ThreadTimes::default(),
+            gvt_samples: Vec::new(),
         }
     }
 }
@@ -238,6 +246,9 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
         let acted = if world.wants_to_act(gvt) {
             let lvt = world.lvt();
+            if self.trace {
+                world.trace_time(self.started.elapsed().as_secs_f64());
+            }
             match catch_unwind(AssertUnwindSafe(|| world.act(gvt))) {
                 Ok(out) => {
                     for m in out {
@@ -373,7 +384,15 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             let old = self.gvt.load();
             if least > old {
                 self.gvt.store(least);
-                self.out.lock().gvt_advances += 1;
+                let mut out = self.out.lock();
+                out.gvt_advances += 1;
+                if self.trace {
+                    out.gvt_samples.push(GvtSample {
+                        time: self.started.elapsed().as_secs_f64(),
+                        gvt: least,
+                    });
+                }
+                drop(out);
                 advanced = true;
             }
             break;
@@ -535,7 +554,8 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     let super::Worlds {
         mut worlds,
         events: initial_events,
-        ..
+        grid,
+        partition,
     } = super::build_worlds(model, grid, initial, config);
     let n = worlds.len();
     let mut inboxes: Vec<Vec<Message<M::State>>> = (0..n).map(|_| Vec::new()).collect();
@@ -579,6 +599,8 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         }),
         out: F::Mutex::new(Output::default()),
         error: F::Mutex::new(None),
+        trace: config.trace,
+        started: start,
     });
     for w in 0..n {
         shared.injector.push(w);
@@ -627,11 +649,13 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     }
     let mut out = std::mem::take(&mut *shared.out.lock());
     deliver(std::mem::take(&mut out.pending));
-    let world_counters = shared
-        .worlds
-        .iter()
-        .map(|w| w.lock().world.counters().clone())
-        .collect();
+    let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
+    let world_counters = locked.iter().map(|s| s.world.counters().clone()).collect();
+    let trace = config.trace.then(|| {
+        let mut worlds: Vec<&mut World<M>> = locked.iter_mut().map(|s| &mut s.world).collect();
+        super::collect_trace(&grid, &partition, &mut worlds, out.gvt_samples)
+    });
+    drop(locked);
     let counters = Counters::from_worlds(world_counters, out.gvt_advances, shared.gvt.load());
     Ok(ThreadedReport {
         frames,
@@ -640,5 +664,6 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         wall_seconds: start.elapsed().as_secs_f64(),
         threads,
         initial_events,
+        trace,
     })
 }

@@ -45,6 +45,7 @@ use crate::kernel::counters::Counters;
 use crate::kernel::gvt::global_virtual_time;
 use crate::kernel::message::{Input, Message, MessageKind, Sign};
 use crate::kernel::partition::{Partition, WorldId};
+use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::World;
 use crate::model::{CellModel, Step};
 use crate::state::canonical_hash;
@@ -158,6 +159,8 @@ pub struct VirtualRun<M: CellModel> {
     limit: Step,
     end: Step,
     gvt_advances: u64,
+    started: std::time::Instant,
+    gvt_samples: Vec<GvtSample>,
 }
 
 impl<M: CellModel> VirtualRun<M> {
@@ -196,6 +199,8 @@ impl<M: CellModel> VirtualRun<M> {
             limit: 0,
             end: 0,
             gvt_advances: 0,
+            started: std::time::Instant::now(),
+            gvt_samples: Vec::new(),
         };
         for w in &mut worlds {
             let msgs = w.start();
@@ -323,6 +328,15 @@ impl<M: CellModel> VirtualRun<M> {
         self.worlds.iter().map(|w| w.steps_held()).sum()
     }
 
+    /// The run trace recorded so far (`config.trace`; empty lists otherwise): LVT samples,
+    /// rollbacks, GVT advances, messages per step. Times are wall-clock seconds since the
+    /// run was built.
+    pub fn take_trace(&mut self) -> RunTrace {
+        let gvt = std::mem::take(&mut self.gvt_samples);
+        let mut worlds: Vec<&mut World<M>> = self.worlds.iter_mut().collect();
+        super::collect_trace(&self.grid, &self.partition, &mut worlds, gvt)
+    }
+
     /// The decisions taken so far, as a string [`parse_schedule`] turns back into a schedule
     /// that replays this run exactly (empty unless `record_schedule`).
     pub fn schedule_string(&self) -> String {
@@ -394,6 +408,10 @@ impl<M: CellModel> VirtualRun<M> {
             self.decisions.push(i as u32);
         }
         if i < acts.len() {
+            if self.config.trace {
+                let now = self.started.elapsed().as_secs_f64();
+                self.worlds[acts[i]].trace_time(now);
+            }
             let msgs = self.worlds[acts[i]].act(gvt);
             self.post(msgs);
         } else {
@@ -423,6 +441,12 @@ impl<M: CellModel> VirtualRun<M> {
         if new > self.gvt {
             self.gvt = new;
             self.gvt_advances += 1;
+            if self.config.trace {
+                self.gvt_samples.push(GvtSample {
+                    time: self.started.elapsed().as_secs_f64(),
+                    gvt: new,
+                });
+            }
         } else if self.committed + 1 >= self.gvt || self.committed >= self.limit {
             return;
         }

@@ -128,6 +128,9 @@ pub struct KernelConfig {
     /// Record the virtual executor's decisions so the run can print a replay string
     /// (costs four bytes per decision).
     pub record_schedule: bool,
+    /// Record a run trace (LVT over time, rollbacks, GVT advances, messages per step).
+    /// Observation only: the committed bits are the same either way.
+    pub trace: bool,
     /// A deliberate bug, for tests that prove the checks can fire.
     #[doc(hidden)]
     pub planted_bug: PlantedBug,
@@ -143,6 +146,7 @@ impl Default for KernelConfig {
             partition_seed: 0,
             schedule: ScheduleSpec::Seeded(0),
             record_schedule: true,
+            trace: false,
             planted_bug: PlantedBug::None,
         }
     }
@@ -184,6 +188,12 @@ impl KernelConfig {
     /// Sets the schedule.
     pub fn schedule(mut self, schedule: ScheduleSpec) -> Self {
         self.schedule = schedule;
+        self
+    }
+
+    /// Turns trace recording on or off.
+    pub fn trace(mut self, on: bool) -> Self {
+        self.trace = on;
         self
     }
 

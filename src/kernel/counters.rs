@@ -5,6 +5,8 @@
 //!   computations and re-executions), the share whose result was committed;
 //! - `step_efficiency = steps_committed / steps_computed` — the same per world-step
 //!   (a re-executed step counts once however many of its cells were recomputed);
+//! - at the end of a run: `cells_computed = cells_committed + cells_rolled_back` and
+//!   `steps_computed = steps_committed + steps_reexecuted` (per world and in total);
 //! - rollback length = LVT − the straggler's step, in steps.
 
 use serde::Serialize;
@@ -25,6 +27,12 @@ pub struct WorldCounters {
     pub cells_recomputed: u64,
     /// Cell computations whose results were committed.
     pub cells_committed: u64,
+    /// Cell computations superseded by a re-execution of the same cell-step (never
+    /// committed). At the end of a run `cells_computed = cells_committed + cells_rolled_back`.
+    pub cells_rolled_back: u64,
+    /// Steps re-executed (one per dirty step repaired). At the end of a run
+    /// `steps_computed = steps_committed + steps_reexecuted`.
+    pub steps_reexecuted: u64,
     /// Rollbacks caused by a positive straggler.
     pub rollbacks_primary: u64,
     /// Rollbacks caused only by anti-messages.
@@ -90,6 +98,8 @@ impl AddAssign<&WorldCounters> for WorldCounters {
         self.cells_computed += o.cells_computed;
         self.cells_recomputed += o.cells_recomputed;
         self.cells_committed += o.cells_committed;
+        self.cells_rolled_back += o.cells_rolled_back;
+        self.steps_reexecuted += o.steps_reexecuted;
         self.rollbacks_primary += o.rollbacks_primary;
         self.rollbacks_secondary += o.rollbacks_secondary;
         self.rollback_length_primary += o.rollback_length_primary;

@@ -22,10 +22,12 @@ pub mod gvt;
 pub mod message;
 pub mod partition;
 pub mod synthetic;
+pub mod trace;
 pub mod world;
 
 pub use config::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
 pub use counters::{Counters, WorldCounters};
 pub use message::{Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
+pub use trace::{RunTrace, WorldTrace};
 pub use world::World;

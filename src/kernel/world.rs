@@ -22,6 +22,7 @@ use super::config::{KernelConfig, PlantedBug, RollbackMode};
 use super::counters::WorldCounters;
 use super::message::{Message, MessageKey, MessageKind, Sign};
 use super::partition::{Partition, WorldId};
+use super::trace::WorldTrace;
 use crate::frame::{Event, EventKind};
 use crate::grid::Grid;
 use crate::hash::StateHash;
@@ -36,6 +37,8 @@ use std::sync::Arc;
 struct Out<S> {
     bodies: Vec<(u32, S)>,
     events: Vec<Event>,
+    /// Whether a cell computation produced it (an empty cell's output is not computed).
+    computed: bool,
 }
 
 impl<S> Out<S> {
@@ -43,6 +46,7 @@ impl<S> Out<S> {
         Out {
             bodies: Vec::new(),
             events: Vec::new(),
+            computed: false,
         }
     }
 
@@ -177,6 +181,7 @@ pub struct World<M: CellModel> {
     counters: WorldCounters,
     scratch: Vec<M::State>,
     trace: Option<Vec<(Step, u32)>>,
+    record: Option<WorldTrace>,
 }
 
 /// Whether two states are the same bits: equal and hashing equal (so `0.0` and `-0.0`, which
@@ -243,6 +248,7 @@ impl<M: CellModel> World<M> {
             counters: WorldCounters::default(),
             scratch: Vec::new(),
             trace: None,
+            record: None,
         }
     }
 
@@ -254,6 +260,23 @@ impl<M: CellModel> World<M> {
     /// The re-executed (step, cell) computations recorded since the last call, in order.
     pub fn take_trace(&mut self) -> Vec<(Step, u32)> {
         self.trace.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
+    /// Starts (or stops) recording this world's part of a run trace ([`WorldTrace`]).
+    pub fn set_recording(&mut self, on: bool) {
+        self.record = on.then(WorldTrace::default);
+    }
+
+    /// Sets the time stamped on what the trace records next (seconds since the run started).
+    pub fn trace_time(&mut self, now: f64) {
+        if let Some(r) = &mut self.record {
+            r.set_time(now);
+        }
+    }
+
+    /// The trace recorded so far (empty if recording is off); recording continues.
+    pub fn take_record(&mut self) -> WorldTrace {
+        self.record.as_mut().map(std::mem::take).unwrap_or_default()
     }
 
     /// This world's head: its states exist up to this step (optimistic modes).
@@ -287,6 +310,11 @@ impl<M: CellModel> World<M> {
         let mut out = Vec::new();
         for x in 0..self.cells.len() {
             self.send_ghost(x, 0, &mut out);
+        }
+        if let Some(r) = &mut self.record {
+            for m in &out {
+                r.sent(m.step, m.is_anti());
+            }
         }
         out
     }
@@ -390,22 +418,38 @@ impl<M: CellModel> World<M> {
         let mut out = Vec::new();
         if self.mode == RollbackMode::Conservative {
             self.act_conservative(gvt, &mut out);
-            return out;
+        } else {
+            self.act_optimistic(gvt, &mut out);
         }
+        if self.record.is_some() {
+            let lvt = self.lvt();
+            if let Some(r) = &mut self.record {
+                for m in &out {
+                    r.sent(m.step, m.is_anti());
+                }
+                r.sample_lvt(self.id, lvt);
+            }
+        }
+        out
+    }
+
+    fn act_optimistic(&mut self, gvt: Step, out: &mut Vec<Message<M::State>>) {
         if !self.inbox.is_empty() {
-            self.drain_inbox(&mut out);
+            self.drain_inbox(out);
         } else if !self.dirty.is_empty() {
             // Rollback and Propagate runs to the head in one action (thesis Algorithm 2), so
             // other worlds see the repaired outputs as early as possible.
             while let Some(&s) = self.dirty.keys().next() {
-                self.reexecute(s, &mut out);
+                self.reexecute(s, out);
+            }
+            if let Some(r) = &mut self.record {
+                r.repaired();
             }
         } else if self.head < self.end && self.head + 1 < gvt + self.window {
-            self.advance(&mut out);
+            self.advance(out);
         } else {
             self.counters.idle_acts += 1;
         }
-        out
     }
 
     /// The bodies of its cells at committed step `t` (any order).
@@ -532,7 +576,11 @@ impl<M: CellModel> World<M> {
         }
         bodies.sort_by_key(|(d, b)| (*d, M::id(b)));
         self.counters.cells_computed += 1;
-        Out { bodies, events }
+        Out {
+            bodies,
+            events,
+            computed: true,
+        }
     }
 
     fn same_out(&self, a: &Out<M::State>, b: &Out<M::State>) -> bool {
@@ -746,6 +794,9 @@ impl<M: CellModel> World<M> {
             }
             c.steps_rolled_back += len;
             c.rollback_length_max = c.rollback_length_max.max(len);
+            if let Some(r) = &mut self.record {
+                r.rollback(self.id, s0, len, primary);
+            }
             if self.mode == RollbackMode::World {
                 let all: BTreeSet<u32> = (0..self.cells.len() as u32).collect();
                 for s in s0..self.head {
@@ -892,6 +943,7 @@ impl<M: CellModel> World<M> {
     fn reexecute(&mut self, s: Step, out: &mut Vec<Message<M::State>>) {
         let cells = self.dirty.remove(&s).unwrap_or_default();
         self.counters.steps_computed += 1;
+        self.counters.steps_reexecuted += 1;
         let i = self.si(s);
         let mut changed_dst: BTreeSet<u32> = BTreeSet::new();
         let mut changed_mig: BTreeSet<(usize, WorldId)> = BTreeSet::new();
@@ -904,10 +956,17 @@ impl<M: CellModel> World<M> {
                 if let Some(t) = &mut self.trace {
                     t.push((s, self.cells[x]));
                 }
+                if let Some(r) = &mut self.record {
+                    r.recomputed(self.cells[x]);
+                }
                 self.compute(x, s)
             };
-            let old = self.slots[i].outs[x].take().unwrap_or_else(Out::empty);
+            let mut old = self.slots[i].outs[x].take().unwrap_or_else(Out::empty);
+            // The earlier computation of this cell-step is superseded (its result is kept
+            // only if equal, and then it stands for the new computation).
+            self.counters.cells_rolled_back += old.computed as u64;
             if self.same_out(&old, &new) {
+                old.computed = new.computed;
                 self.slots[i].outs[x] = Some(old);
                 continue;
             }
