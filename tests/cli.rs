@@ -745,3 +745,53 @@ fn trace_on_the_reference_executor_names_the_fix() {
     let err = fails(&["run", "--steps", "2", "--trace", "t.json"]);
     assert!(err.contains("--executor virtual"), "{err}");
 }
+
+#[test]
+fn plot_draws_three_charts_that_decode_as_svg_images_from_a_recorded_trace() {
+    let dir = tempfile::tempdir().unwrap();
+    let trace = dir.path().join("trace.json");
+    ok(&[
+        "run",
+        "--objects",
+        "80",
+        "--steps",
+        "30",
+        "--executor",
+        "virtual",
+        "--worlds",
+        "4",
+        "--schedule-seed",
+        "1",
+        "--trace",
+        trace.to_str().unwrap(),
+    ]);
+    let out = dir.path().join("charts");
+    ok(&[
+        "plot",
+        trace.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    for name in ["spacetime.svg", "territory.svg", "heatmap.svg"] {
+        let text = std::fs::read_to_string(out.join(name)).unwrap();
+        let tree = usvg::Tree::from_str(&text, &usvg::Options::default())
+            .unwrap_or_else(|e| panic!("{name} decodes as SVG: {e}"));
+        assert!(
+            tree.size().width() > 100.0 && tree.size().height() > 100.0,
+            "{name}"
+        );
+        assert!(tree.root().has_children(), "{name} draws something");
+    }
+}
+
+#[test]
+fn plot_of_a_file_that_is_not_a_trace_names_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.json");
+    std::fs::write(&bad, "{\"hash\": 1}").unwrap();
+    let err = fails(&["plot", bad.to_str().unwrap()]);
+    assert!(
+        err.contains("bad.json") && err.contains("soda run --trace"),
+        "{err}"
+    );
+}

@@ -3,8 +3,10 @@
 //! later commands (`verify`, benchmarks) and later `run` options (executor, worlds, threads,
 //! rollback mode, window, partition, schedule seed) slot in without reshaping the rest.
 
+mod charts;
 mod exec_args;
 mod output;
+mod plot;
 mod record;
 mod run;
 mod scenes;
@@ -48,6 +50,11 @@ enum Command {
     /// the command that reproduces it; the exit status is then 1.
     #[command(after_help = verify::AFTER_HELP)]
     Verify(verify::VerifyArgs),
+    /// Draw a trace written by `soda run --trace`: a space-time diagram (each world's LVT
+    /// over wall time, rollbacks as drops, the GVT line), a territory map and a rollback heat
+    /// map, as SVG files.
+    #[command(after_help = plot::AFTER_HELP)]
+    Plot(plot::PlotArgs),
 }
 
 /// Parses the command line, runs the command and turns any error into a message on stderr
@@ -58,6 +65,7 @@ pub fn main() -> ExitCode {
         Command::Run(args) => run::run(&args),
         Command::Scenes(args) => scenes::scenes(&args),
         Command::Verify(args) => verify::verify(&args),
+        Command::Plot(args) => plot::plot(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -7,11 +7,11 @@
 
 use super::partition::WorldId;
 use crate::model::Step;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// What made a world roll back (SPEC.md §K5).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum RollbackCause {
     /// At least one positive message of the batch was late (a primary rollback).
@@ -21,7 +21,7 @@ pub enum RollbackCause {
 }
 
 /// One rollback of one world.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RollbackRecord {
     /// The world that rolled back.
     pub world: WorldId,
@@ -39,7 +39,7 @@ pub struct RollbackRecord {
 }
 
 /// A world's LVT at a time.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LvtSample {
     /// The world.
     pub world: WorldId,
@@ -50,7 +50,7 @@ pub struct LvtSample {
 }
 
 /// A GVT advance.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GvtSample {
     /// Seconds since the run started.
     pub time: f64,
@@ -59,7 +59,7 @@ pub struct GvtSample {
 }
 
 /// Messages sent, stamped with one step, summed over worlds.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct StepMessages {
     /// The step the messages are stamped with.
     pub step: Step,
@@ -137,7 +137,8 @@ impl WorldTrace {
 }
 
 /// The trace of a whole run: the worlds' parts merged (each list sorted by time, then world).
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RunTrace {
     /// Number of worlds.
     pub worlds: usize,

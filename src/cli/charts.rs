@@ -1,0 +1,197 @@
+//! SVG charts of a run trace (plotters): the space-time diagram, the territory map and the
+//! rollback heat map. SVG needs no fonts installed, and any browser or paper tool opens it.
+
+use anyhow::{anyhow, Result};
+use plotters::prelude::*;
+use soda::kernel::RunTrace;
+use std::path::Path;
+
+/// Turns a plotters error (not always `Send`) into an error naming the chart.
+fn drawing<T, E: std::fmt::Display>(r: std::result::Result<T, E>, what: &Path) -> Result<T> {
+    r.map_err(|e| anyhow!("cannot draw {}: {e}", what.display()))
+}
+
+/// A world's colour (the same in every chart).
+fn world_colour(w: u32) -> RGBColor {
+    let c = Palette99::pick(w as usize).to_rgba();
+    RGBColor(c.0, c.1, c.2)
+}
+
+/// Each world's LVT against wall time (rollbacks show as drops) and the GVT line.
+pub fn space_time(trace: &RunTrace, path: &Path) -> Result<()> {
+    let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
+    drawing(root.fill(&WHITE), path)?;
+    let t_max = trace
+        .lvt
+        .iter()
+        .map(|s| s.time)
+        .chain(trace.gvt.iter().map(|g| g.time))
+        .fold(1e-6, f64::max);
+    let s_max = trace
+        .lvt
+        .iter()
+        .map(|s| s.lvt)
+        .chain(trace.gvt.iter().map(|g| g.gvt))
+        .max()
+        .unwrap_or(1)
+        .max(1);
+    let mut chart = drawing(
+        ChartBuilder::on(&root)
+            .caption(
+                format!(
+                    "Space-time diagram: LVT of {} worlds, GVT in black",
+                    trace.worlds
+                ),
+                ("sans-serif", 20),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0f64..t_max * 1.02, 0u64..s_max + 1),
+        path,
+    )?;
+    drawing(
+        chart
+            .configure_mesh()
+            .x_desc("wall time (s)")
+            .y_desc("step")
+            .draw(),
+        path,
+    )?;
+    for w in 0..trace.worlds as u32 {
+        let colour = world_colour(w);
+        // A step line: the LVT holds until the next sample, then jumps (down on a rollback).
+        let mut points = Vec::new();
+        for s in trace.lvt.iter().filter(|s| s.world == w) {
+            if let Some(&(_, last)) = points.last() {
+                points.push((s.time, last));
+            }
+            points.push((s.time, s.lvt));
+        }
+        drawing(
+            chart.draw_series(LineSeries::new(points, colour.stroke_width(1))),
+            path,
+        )?
+        .label(format!("world {w}"))
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+    }
+    let mut gvt = Vec::new();
+    for g in &trace.gvt {
+        if let Some(&(_, last)) = gvt.last() {
+            gvt.push((g.time, last));
+        }
+        gvt.push((g.time, g.gvt));
+    }
+    drawing(
+        chart.draw_series(LineSeries::new(gvt, BLACK.stroke_width(2))),
+        path,
+    )?
+    .label("GVT")
+    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
+    drawing(
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw(),
+        path,
+    )?;
+    drawing(root.present(), path)
+}
+
+/// A top view of the grid (x across, z down): one square per column of cells, filled by
+/// `value(x, z)`.
+fn top_view(
+    trace: &RunTrace,
+    path: &Path,
+    title: &str,
+    fill: impl Fn(i32, i32) -> RGBColor,
+) -> Result<()> {
+    let [nx, _, nz] = trace.grid;
+    let side = (560 / nx.max(nz).max(1)).clamp(4, 60) as u32;
+    let size = (side * nx as u32 + 120, side * nz as u32 + 110);
+    let root = SVGBackend::new(path, size).into_drawing_area();
+    drawing(root.fill(&WHITE), path)?;
+    let mut chart = drawing(
+        ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(40)
+            .build_cartesian_2d(0..nx, nz..0),
+        path,
+    )?;
+    drawing(
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("cell x")
+            .y_desc("cell z")
+            .draw(),
+        path,
+    )?;
+    let squares = (0..nx).flat_map(|x| (0..nz).map(move |z| (x, z)));
+    drawing(
+        chart.draw_series(
+            squares.map(|(x, z)| Rectangle::new([(x, z), (x + 1, z + 1)], fill(x, z).filled())),
+        ),
+        path,
+    )?;
+    drawing(root.present(), path)
+}
+
+/// The owner of every column of cells, seen from above (the world owning most of the
+/// column's cells; ties to the lower id).
+pub fn territory_map(trace: &RunTrace, path: &Path) -> Result<()> {
+    let [nx, ny, _] = trace.grid;
+    let owner = |x: i32, z: i32| -> u32 {
+        let mut count = vec![0u32; trace.worlds.max(1)];
+        for y in 0..ny {
+            let i = (x + nx * (y + ny * z)) as usize;
+            if let Some(&w) = trace.owners.get(i) {
+                if let Some(c) = count.get_mut(w as usize) {
+                    *c += 1;
+                }
+            }
+        }
+        (0..count.len())
+            .max_by_key(|&w| (count[w], std::cmp::Reverse(w)))
+            .unwrap_or(0) as u32
+    };
+    top_view(
+        trace,
+        path,
+        &format!(
+            "Territories of {} worlds (top view, majority owner of each column)",
+            trace.worlds
+        ),
+        |x, z| world_colour(owner(x, z)),
+    )
+}
+
+/// Re-executed cell computations per column of cells, seen from above (white: none; dark
+/// red: the most).
+pub fn rollback_heat_map(trace: &RunTrace, path: &Path) -> Result<()> {
+    let [nx, ny, nz] = trace.grid;
+    let mut heat = vec![0u64; (nx.max(0) * nz.max(0)) as usize];
+    for &(cell, n) in &trace.recomputed_cells {
+        let c = cell as i32;
+        let (x, z) = (c % nx, c / (nx * ny));
+        if x < nx && z < nz {
+            heat[(x + nx * z) as usize] += n;
+        }
+    }
+    let max = heat.iter().copied().max().unwrap_or(0).max(1);
+    let total: u64 = heat.iter().sum();
+    top_view(
+        trace,
+        path,
+        &format!("Rollback heat map: {total} cells recomputed (darkest column: {max})"),
+        |x, z| {
+            let f = heat[(x + nx * z) as usize] as f64 / max as f64;
+            let fade = |full: f64| (255.0 - (255.0 - full) * f).round() as u8;
+            RGBColor(fade(160.0), fade(0.0), fade(0.0))
+        },
+    )
+}

@@ -1,0 +1,49 @@
+//! `soda plot`: charts of a trace written by `soda run --trace`.
+
+use super::charts;
+use anyhow::{Context, Result};
+use clap::Args;
+use soda::kernel::RunTrace;
+use std::path::PathBuf;
+
+/// Examples shown after `soda plot --help`.
+pub const AFTER_HELP: &str = "\
+Examples:
+  soda run --executor virtual --worlds 8 --schedule-seed 3 --steps 120 --trace t.json
+  soda plot t.json --out charts     charts/spacetime.svg, territory.svg, heatmap.svg";
+
+/// Options of `soda plot`.
+#[derive(Debug, Args)]
+pub struct PlotArgs {
+    /// A trace written by `soda run --trace FILE`.
+    #[arg(value_name = "TRACE")]
+    pub trace: PathBuf,
+
+    /// Directory for the charts (created if missing).
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    pub out: PathBuf,
+}
+
+/// Runs the command: reads the trace and writes the three SVG charts.
+pub fn plot(args: &PlotArgs) -> Result<()> {
+    let text = std::fs::read_to_string(&args.trace)
+        .with_context(|| format!("cannot read the trace {}", args.trace.display()))?;
+    let trace: RunTrace = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{} is not a trace written by `soda run --trace`",
+            args.trace.display()
+        )
+    })?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the directory {}", args.out.display()))?;
+    let spacetime = args.out.join("spacetime.svg");
+    let territory = args.out.join("territory.svg");
+    let heatmap = args.out.join("heatmap.svg");
+    charts::space_time(&trace, &spacetime)?;
+    charts::territory_map(&trace, &territory)?;
+    charts::rollback_heat_map(&trace, &heatmap)?;
+    for p in [spacetime, territory, heatmap] {
+        println!("wrote {}", p.display());
+    }
+    Ok(())
+}
