@@ -795,3 +795,49 @@ fn plot_of_a_file_that_is_not_a_trace_names_the_file() {
         "{err}"
     );
 }
+
+#[test]
+fn every_quick_experiment_writes_a_csv_and_a_chart_that_decodes() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    for name in [
+        "scalability",
+        "raw-performance",
+        "sync-share",
+        "rp-efficiency",
+    ] {
+        ok(&["experiment", name, "--quick", "--out", out]);
+        let csv = std::fs::read_to_string(dir.path().join(format!("{name}.csv"))).unwrap();
+        let lines: Vec<&str> = csv.lines().collect();
+        assert!(lines.len() >= 3, "{name}: header and runs:\n{csv}");
+        let width = lines[0].split(',').count();
+        assert!(
+            lines.iter().all(|l| l.split(',').count() == width),
+            "{name}: {csv}"
+        );
+        assert!(lines[0].starts_with("scene,executor,"), "{name}");
+        let svg = std::fs::read_to_string(dir.path().join(format!("{name}.svg"))).unwrap();
+        let tree = usvg::Tree::from_str(&svg, &usvg::Options::default())
+            .unwrap_or_else(|e| panic!("{name}.svg decodes: {e}"));
+        assert!(tree.root().has_children(), "{name}.svg draws something");
+    }
+}
+
+#[test]
+fn experiment_runs_commit_the_reference_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    ok(&[
+        "experiment",
+        "sync-share",
+        "--quick",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    let csv = std::fs::read_to_string(dir.path().join("sync-share.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    let col = lines[0].split(',').position(|h| h == "hash").unwrap();
+    let reference = summary_hash(&ok(&["run", "--objects", "300", "--steps", "60"]));
+    for l in &lines[1..] {
+        assert_eq!(l.split(',').nth(col).unwrap(), reference, "{l}");
+    }
+}

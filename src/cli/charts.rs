@@ -195,3 +195,123 @@ pub fn rollback_heat_map(trace: &RunTrace, path: &Path) -> Result<()> {
         },
     )
 }
+
+/// Grouped bars: one group per category, one bar per series.
+pub fn bar_chart(
+    path: &Path,
+    title: &str,
+    y_desc: &str,
+    categories: &[String],
+    series: &[(String, Vec<f64>)],
+) -> Result<()> {
+    let root = SVGBackend::new(path, (900, 520)).into_drawing_area();
+    drawing(root.fill(&WHITE), path)?;
+    let y_max = series
+        .iter()
+        .flat_map(|s| s.1.iter().copied())
+        .fold(1e-9, f64::max)
+        * 1.15;
+    let n = categories.len().max(1);
+    let mut chart = drawing(
+        ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0f64..n as f64, 0f64..y_max),
+        path,
+    )?;
+    let labels = categories.to_vec();
+    drawing(
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(n * 2 + 1)
+            .x_label_formatter(&move |x| {
+                let i = x.floor() as usize;
+                if (x - i as f64 - 0.5).abs() < 0.26 {
+                    labels.get(i).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc(y_desc)
+            .draw(),
+        path,
+    )?;
+    let k = series.len().max(1) as f64;
+    for (j, (name, values)) in series.iter().enumerate() {
+        let colour = world_colour(j as u32);
+        let bars = values.iter().enumerate().map(move |(i, &v)| {
+            let x0 = i as f64 + 0.1 + 0.8 * j as f64 / k;
+            Rectangle::new([(x0, 0.0), (x0 + 0.8 / k, v)], colour.filled())
+        });
+        drawing(chart.draw_series(bars), path)?
+            .label(name.clone())
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colour.filled()));
+    }
+    drawing(
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw(),
+        path,
+    )?;
+    drawing(root.present(), path)
+}
+
+/// Lines with markers: one per series.
+pub fn line_chart(
+    path: &Path,
+    title: &str,
+    axes: (&str, &str),
+    series: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    let root = SVGBackend::new(path, (900, 520)).into_drawing_area();
+    drawing(root.fill(&WHITE), path)?;
+    let pts = || series.iter().flat_map(|s| s.1.iter().copied());
+    let x_max = pts().map(|p| p.0).fold(1e-9, f64::max) * 1.05;
+    let y_max = pts().map(|p| p.1).fold(1e-9, f64::max) * 1.15;
+    let mut chart = drawing(
+        ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0f64..x_max, 0f64..y_max),
+        path,
+    )?;
+    drawing(
+        chart.configure_mesh().x_desc(axes.0).y_desc(axes.1).draw(),
+        path,
+    )?;
+    for (j, (name, points)) in series.iter().enumerate() {
+        let colour = world_colour(j as u32);
+        drawing(
+            chart.draw_series(LineSeries::new(points.clone(), colour.stroke_width(2))),
+            path,
+        )?
+        .label(name.clone())
+        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+        drawing(
+            chart.draw_series(
+                points
+                    .iter()
+                    .map(move |&p| Circle::new(p, 3, colour.filled())),
+            ),
+            path,
+        )?;
+    }
+    drawing(
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw(),
+        path,
+    )?;
+    drawing(root.present(), path)
+}

@@ -5,6 +5,7 @@
 
 mod charts;
 mod exec_args;
+mod experiment;
 mod output;
 mod plot;
 mod record;
@@ -55,6 +56,9 @@ enum Command {
     /// map, as SVG files.
     #[command(after_help = plot::AFTER_HELP)]
     Plot(plot::PlotArgs),
+    /// Run one of the thesis's §4.2 experiments and write its data (CSV) and a chart (SVG).
+    #[command(after_help = experiment::AFTER_HELP)]
+    Experiment(experiment::ExperimentArgs),
 }
 
 /// Parses the command line, runs the command and turns any error into a message on stderr
@@ -66,6 +70,7 @@ pub fn main() -> ExitCode {
         Command::Scenes(args) => scenes::scenes(&args),
         Command::Verify(args) => verify::verify(&args),
         Command::Plot(args) => plot::plot(&args),
+        Command::Experiment(args) => experiment::experiment(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

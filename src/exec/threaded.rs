@@ -25,7 +25,7 @@ use crate::kernel::counters::Counters;
 use crate::kernel::message::Message;
 use crate::kernel::partition::WorldId;
 use crate::kernel::trace::{GvtSample, RunTrace};
-use crate::kernel::world::World;
+use crate::kernel::world::{ActionKind, World};
 use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
 use crate::state::canonical_hash;
@@ -66,6 +66,12 @@ pub enum ExecError {
 pub struct ThreadTimes {
     /// Seconds inside world turns that computed something.
     pub busy_seconds: f64,
+    /// Of the busy time, seconds in actions applying an inbox (message exchange).
+    pub receive_seconds: f64,
+    /// Of the busy time, seconds in actions re-executing dirty steps (rollback).
+    pub rollback_seconds: f64,
+    /// Of the busy time, seconds in actions computing forward.
+    pub compute_seconds: f64,
     /// Seconds inside GVT rounds (reading the published bounds).
     pub gvt_seconds: f64,
     /// Seconds with no task, or in turns that computed nothing.
@@ -211,7 +217,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// One turn of world `w`: receive its inbox, hand its newly committed steps to the frame
     /// assembly and fossil-collect, act if it wants to, route the output, publish its bound.
     /// Returns whether it acted.
-    fn run_world(&self, w: usize, local: &Worker<usize>) -> bool {
+    fn run_world(&self, w: usize, local: &Worker<usize>, times: &mut ThreadTimes) -> bool {
         let mut slot = self.worlds[w].lock();
         self.scheduled[w].store(0);
         {
@@ -249,7 +255,16 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             if self.trace {
                 world.trace_time(self.started.elapsed().as_secs_f64());
             }
-            match catch_unwind(AssertUnwindSafe(|| world.act(gvt))) {
+            let kind = world.next_action();
+            let a0 = Instant::now();
+            let acted = catch_unwind(AssertUnwindSafe(|| world.act(gvt)));
+            let spent = a0.elapsed().as_secs_f64();
+            *match kind {
+                ActionKind::Receive => &mut times.receive_seconds,
+                ActionKind::Repair => &mut times.rollback_seconds,
+                ActionKind::Compute => &mut times.compute_seconds,
+            } += spent;
+            match acted {
                 Ok(out) => {
                     for m in out {
                         self.send(m, local);
@@ -478,7 +493,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             match self.find_task(&local, &stealers, me, &mut times.steals) {
                 Some(w) => {
                     spins = 0;
-                    let acted = self.run_world(w, &local);
+                    let acted = self.run_world(w, &local, &mut times);
                     if acted {
                         times.actions += 1;
                         times.busy_seconds += t0.elapsed().as_secs_f64();
@@ -507,6 +522,9 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
         let mut out = self.out.lock();
         out.times.busy_seconds += times.busy_seconds;
+        out.times.receive_seconds += times.receive_seconds;
+        out.times.rollback_seconds += times.rollback_seconds;
+        out.times.compute_seconds += times.compute_seconds;
         out.times.gvt_seconds += times.gvt_seconds;
         out.times.idle_seconds += times.idle_seconds;
         out.times.actions += times.actions;

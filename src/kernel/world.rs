@@ -158,6 +158,17 @@ impl<S: Clone> Slot<S> {
     }
 }
 
+/// The kinds of a world's actions (SPEC.md §K5), for time accounting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ActionKind {
+    /// Apply the inbox (message exchange).
+    Receive,
+    /// Re-execute dirty steps (rollback).
+    Repair,
+    /// Compute forward (conservative mode: every action that is not a receive).
+    Compute,
+}
+
 /// One logical process (see the module doc).
 pub struct World<M: CellModel> {
     id: WorldId,
@@ -390,6 +401,18 @@ impl<M: CellModel> World<M> {
     /// re-execute): the speculative kind of work an executor may postpone.
     pub fn only_advances(&self) -> bool {
         self.inbox.is_empty() && self.dirty.is_empty()
+    }
+
+    /// What the next [`act`](Self::act) will do: apply the inbox, repair dirty steps
+    /// (Rollback and Propagate) or compute forward.
+    pub fn next_action(&self) -> ActionKind {
+        if !self.inbox.is_empty() {
+            ActionKind::Receive
+        } else if !self.dirty.is_empty() {
+            ActionKind::Repair
+        } else {
+            ActionKind::Compute
+        }
     }
 
     /// Whether acting now may do something. In conservative mode an action may still find

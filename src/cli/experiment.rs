@@ -1,0 +1,417 @@
+//! `soda experiment NAME`: the thesis's §4.2 experiments as commands. Each writes
+//! `DIR/NAME.csv` (one row per run: the run's configuration, wall time, hash and every
+//! counter, plus the experiment's own columns) and `DIR/NAME.svg` (a chart), with a progress
+//! bar. `--quick` runs a small version in well under a minute (used by the tests).
+
+use super::charts;
+use super::table::run_row;
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use soda::frame::StatesWanted;
+use soda::kernel::trace::RunTrace;
+use soda::kernel::{KernelConfig, RollbackMode, ScheduleSpec};
+use soda::scene::builtin::builtin;
+use soda::scene::Scene;
+use soda::sim::{run_scene, ExecutorKind, RunOptions, RunReport};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+
+/// Examples shown after `soda experiment --help`.
+pub const AFTER_HELP: &str = "\
+Examples:
+  soda experiment rp-efficiency --quick --out results
+  soda experiment scalability --out results     results/scalability.csv and .svg
+  soda experiment sync-share
+  soda experiment raw-performance";
+
+/// The experiments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExperimentName {
+    /// Speed-up of the threaded executor over the reference for 1..cores threads and
+    /// several world counts (falling-cubes).
+    Scalability,
+    /// The largest number of falling cubes simulated at 24 committed steps per wall-clock
+    /// second, per executor.
+    RawPerformance,
+    /// Share of thread time spent computing, rolling back, exchanging messages, in GVT and
+    /// idle, per rollback mode (threaded executor).
+    SyncShare,
+    /// Fraction of a territory's cell-steps recomputed per rollback, cell against world
+    /// against conservative, on a sparse and a dense scene (virtual executor, seeded
+    /// schedules).
+    RpEfficiency,
+}
+
+impl ExperimentName {
+    fn file_stem(self) -> &'static str {
+        match self {
+            Self::Scalability => "scalability",
+            Self::RawPerformance => "raw-performance",
+            Self::SyncShare => "sync-share",
+            Self::RpEfficiency => "rp-efficiency",
+        }
+    }
+}
+
+/// Options of `soda experiment`.
+#[derive(Debug, Args)]
+pub struct ExperimentArgs {
+    /// Which experiment.
+    #[arg(value_enum)]
+    pub name: ExperimentName,
+    /// A small version (well under a minute).
+    #[arg(long)]
+    pub quick: bool,
+    /// Directory for the CSV and the chart (created if missing).
+    #[arg(long, value_name = "DIR", default_value = "results")]
+    pub out: PathBuf,
+}
+
+/// One run of an experiment and its extra columns.
+struct Row {
+    report: RunReport,
+    bodies: usize,
+    extra: Vec<(String, String)>,
+}
+
+/// Runs the command.
+pub fn experiment(args: &ExperimentArgs) -> Result<()> {
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the directory {}", args.out.display()))?;
+    let stem = args.name.file_stem();
+    let csv = args.out.join(format!("{stem}.csv"));
+    let svg = args.out.join(format!("{stem}.svg"));
+    let rows = match args.name {
+        ExperimentName::Scalability => scalability(args.quick, &svg)?,
+        ExperimentName::RawPerformance => raw_performance(args.quick, &svg)?,
+        ExperimentName::SyncShare => sync_share(args.quick, &svg)?,
+        ExperimentName::RpEfficiency => rp_efficiency(args.quick, &svg)?,
+    };
+    write_csv(&csv, &rows)?;
+    println!("wrote {}", csv.display());
+    println!("wrote {}", svg.display());
+    Ok(())
+}
+
+fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
+    let mut text = String::new();
+    for (i, r) in rows.iter().enumerate() {
+        let mut cols = run_row(&r.report, r.bodies);
+        cols.extend(r.extra.iter().cloned());
+        if i == 0 {
+            let header: Vec<&str> = cols.iter().map(|c| c.0.as_str()).collect();
+            text.push_str(&(header.join(",") + "\n"));
+        }
+        let values: Vec<&str> = cols.iter().map(|c| c.1.as_str()).collect();
+        text.push_str(&(values.join(",") + "\n"));
+    }
+    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn progress(runs: u64) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::with_draw_target(Some(runs), ProgressDrawTarget::stderr());
+    if let Ok(style) = ProgressStyle::with_template("{bar:40} run {pos}/{len}  {msg}") {
+        bar.set_style(style);
+    }
+    bar
+}
+
+fn scene(name: &str, bodies: usize, seed: u64) -> Result<Scene> {
+    builtin(name, Some(bodies), seed).map_err(|e| anyhow::anyhow!("{e}"))
+}
+
+fn run(scene: &Scene, options: &RunOptions, steps: u64) -> Result<RunReport> {
+    run_scene(scene, options, steps, &StatesWanted::none(), |_, _| {})
+        .with_context(|| format!("the {} executor failed", options.executor.name()))
+}
+
+fn reference() -> RunOptions {
+    RunOptions::default()
+}
+
+fn threaded(worlds: usize, threads: usize, mode: RollbackMode) -> RunOptions {
+    RunOptions {
+        executor: ExecutorKind::Threaded,
+        kernel: KernelConfig::new(worlds).mode(mode),
+        threads,
+    }
+}
+
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(2, |n| n.get())
+}
+
+fn f(x: f64) -> String {
+    format!("{x:.6}")
+}
+
+/// Speed-up of the threaded executor over the reference.
+fn scalability(quick: bool, svg: &Path) -> Result<Vec<Row>> {
+    let (bodies, steps) = if quick { (300, 60) } else { (2000, 120) };
+    let s = scene("falling-cubes", bodies, 0)?;
+    let max_threads = cores().max(2);
+    let world_factors = [1, 2, 4];
+    let bar = progress(1 + (max_threads * world_factors.len()) as u64);
+    bar.set_message("reference");
+    let base = run(&s, &reference(), steps)?;
+    bar.inc(1);
+    let mut rows = vec![Row {
+        bodies,
+        extra: vec![("speedup".into(), f(1.0))],
+        report: base.clone(),
+    }];
+    let mut series = Vec::new();
+    for factor in world_factors {
+        let mut points = Vec::new();
+        for threads in 1..=max_threads {
+            let worlds = threads * factor;
+            bar.set_message(format!("{threads} threads, {worlds} worlds"));
+            let r = run(&s, &threaded(worlds, threads, RollbackMode::Cell), steps)?;
+            if r.hash != base.hash {
+                bail!(
+                    "threaded run ({threads} threads, {worlds} worlds) ended in {} but the \
+                     reference in {}: a determinism bug; please report it",
+                    r.hash,
+                    base.hash
+                );
+            }
+            let speedup = base.wall_seconds / r.wall_seconds;
+            points.push((threads as f64, speedup));
+            rows.push(Row {
+                bodies,
+                extra: vec![("speedup".into(), f(speedup))],
+                report: r,
+            });
+            bar.inc(1);
+        }
+        series.push((format!("{factor} world(s) per thread"), points));
+    }
+    bar.finish_and_clear();
+    charts::line_chart(
+        svg,
+        &format!("Scalability: falling-cubes {bodies}, {steps} steps, cell mode (measured)"),
+        ("threads", "speed-up over the reference"),
+        &series,
+    )?;
+    Ok(rows)
+}
+
+/// Largest cube count at 24 committed steps per second, per executor.
+fn raw_performance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
+    let (steps, start, rounds) = if quick { (6, 100, 3) } else { (48, 500, 6) };
+    const TARGET: f64 = 24.0;
+    let threads = cores().max(2);
+    let executors = [
+        ("reference".to_string(), reference()),
+        (
+            format!("threaded {threads}x{threads}"),
+            threaded(threads, threads, RollbackMode::Cell),
+        ),
+    ];
+    let bar = progress((executors.len() * (rounds + 6)) as u64);
+    let mut rows = Vec::new();
+    let mut best = Vec::new();
+    for (name, options) in &executors {
+        let probe = |n: usize, rows: &mut Vec<Row>| -> Result<f64> {
+            bar.set_message(format!("{name}: {n} cubes"));
+            let r = run(&scene("falling-cubes", n, 0)?, options, steps)?;
+            let rate = r.steps_per_second;
+            rows.push(Row {
+                bodies: n,
+                extra: vec![
+                    ("probe_executor".into(), name.clone()),
+                    ("meets_24_fps".into(), (rate >= TARGET).to_string()),
+                ],
+                report: r,
+            });
+            bar.inc(1);
+            Ok(rate)
+        };
+        // Grow until too slow, then bisect.
+        let (mut lo, mut hi) = (0usize, start);
+        for _ in 0..6 {
+            if probe(hi, &mut rows)? >= TARGET {
+                lo = hi;
+                hi *= 2;
+            } else {
+                break;
+            }
+        }
+        for _ in 0..rounds {
+            let mid = (lo + hi) / 2;
+            if mid == lo {
+                break;
+            }
+            if probe(mid, &mut rows)? >= TARGET {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        best.push(lo as f64);
+    }
+    bar.finish_and_clear();
+    let names: Vec<String> = executors.iter().map(|e| e.0.clone()).collect();
+    charts::bar_chart(
+        svg,
+        &format!("Raw performance: most falling cubes at {TARGET} steps/s ({steps}-step runs)"),
+        "cubes",
+        &names,
+        &[("largest cube count".into(), best)],
+    )?;
+    Ok(rows)
+}
+
+/// Thread time split per rollback mode.
+fn sync_share(quick: bool, svg: &Path) -> Result<Vec<Row>> {
+    let (bodies, steps) = if quick { (300, 60) } else { (2000, 120) };
+    let s = scene("falling-cubes", bodies, 0)?;
+    let threads = cores().max(2);
+    let worlds = 2 * threads;
+    let modes = [
+        RollbackMode::Cell,
+        RollbackMode::World,
+        RollbackMode::Conservative,
+    ];
+    let bar = progress(modes.len() as u64);
+    let parts = ["compute", "rollback", "messages", "gvt", "idle"];
+    let mut shares: Vec<Vec<f64>> = vec![Vec::new(); parts.len()];
+    let mut rows = Vec::new();
+    for mode in modes {
+        bar.set_message(mode.name());
+        let r = run(&s, &threaded(worlds, threads, mode), steps)?;
+        let t = r
+            .kernel
+            .as_ref()
+            .and_then(|k| k.thread_times.clone())
+            .unwrap_or_default();
+        let other = t.busy_seconds - t.compute_seconds - t.rollback_seconds - t.receive_seconds;
+        let values = [
+            t.compute_seconds + other.max(0.0),
+            t.rollback_seconds,
+            t.receive_seconds,
+            t.gvt_seconds,
+            t.idle_seconds,
+        ];
+        let total: f64 = values.iter().sum::<f64>().max(1e-12);
+        let mut extra = Vec::new();
+        for (k, v) in values.iter().enumerate() {
+            shares[k].push(v / total);
+            extra.push((format!("share_{}", parts[k]), f(v / total)));
+        }
+        rows.push(Row {
+            bodies,
+            extra,
+            report: r,
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let names: Vec<String> = modes.iter().map(|m| m.name().to_string()).collect();
+    let series: Vec<(String, Vec<f64>)> = parts
+        .iter()
+        .zip(shares)
+        .map(|(p, v)| (p.to_string(), v))
+        .collect();
+    charts::bar_chart(
+        svg,
+        &format!(
+            "Share of thread time: falling-cubes {bodies}, {worlds} worlds on {threads} threads"
+        ),
+        "share of thread time",
+        &names,
+        &series,
+    )?;
+    Ok(rows)
+}
+
+/// Mean fraction of the territory's cell-steps recomputed per rollback.
+fn territory_fraction(trace: &RunTrace) -> f64 {
+    let mut size = vec![0u64; trace.worlds];
+    for &w in &trace.owners {
+        size[w as usize] += 1;
+    }
+    let fractions: Vec<f64> = trace
+        .rollbacks
+        .iter()
+        .filter(|r| r.length > 0)
+        .map(|r| r.cells_recomputed as f64 / (size[r.world as usize] * r.length).max(1) as f64)
+        .collect();
+    if fractions.is_empty() {
+        0.0
+    } else {
+        fractions.iter().sum::<f64>() / fractions.len() as f64
+    }
+}
+
+/// Fraction of a territory recomputed per rollback, per mode, sparse and dense.
+fn rp_efficiency(quick: bool, svg: &Path) -> Result<Vec<Row>> {
+    let (sparse_n, dense_n, steps, seeds) = if quick {
+        (300, 200, 60, 1)
+    } else {
+        (1000, 1000, 120, 3)
+    };
+    let scenes = [
+        scene("sparse-gas", sparse_n, 1)?,
+        scene("falling-cubes", dense_n, 0)?,
+    ];
+    let modes = [
+        RollbackMode::Cell,
+        RollbackMode::World,
+        RollbackMode::Conservative,
+    ];
+    let bar = progress((scenes.len() * modes.len()) as u64 * seeds);
+    let mut rows = Vec::new();
+    let mut series: Vec<(String, Vec<f64>)> = modes
+        .iter()
+        .map(|m| (m.name().to_string(), Vec::new()))
+        .collect();
+    for s in &scenes {
+        for (k, mode) in modes.iter().enumerate() {
+            let mut sum = 0.0;
+            for seed in 0..seeds {
+                bar.set_message(format!("{} {} seed {seed}", s.name, mode.name()));
+                let options = RunOptions {
+                    executor: ExecutorKind::Virtual,
+                    kernel: KernelConfig::new(8)
+                        .mode(*mode)
+                        .window(16)
+                        .schedule(ScheduleSpec::Seeded(seed))
+                        .record_schedule(false)
+                        .trace(true),
+                    threads: 1,
+                };
+                let r = run(s, &options, steps)?;
+                let fraction = r.trace.as_ref().map_or(0.0, territory_fraction);
+                sum += fraction;
+                rows.push(Row {
+                    bodies: s.bodies.len(),
+                    extra: vec![
+                        ("schedule_seed".into(), seed.to_string()),
+                        ("territory_fraction_per_rollback".into(), f(fraction)),
+                    ],
+                    report: r,
+                });
+                bar.inc(1);
+            }
+            series[k].1.push(sum / seeds as f64);
+        }
+    }
+    bar.finish_and_clear();
+    let names: Vec<String> = scenes
+        .iter()
+        .map(|s| format!("{} {}", s.name, s.bodies.len()))
+        .collect();
+    charts::bar_chart(
+        svg,
+        "Rollback-and-Propagate: share of a territory's cell-steps recomputed per rollback",
+        "fraction of territory x rollback length",
+        &names,
+        &series,
+    )?;
+    Ok(rows)
+}
