@@ -22,6 +22,7 @@ pub mod kernel;
 pub mod math;
 pub mod model;
 pub mod physics;
+pub mod scaling;
 pub mod scene;
 pub mod sim;
 pub mod state;

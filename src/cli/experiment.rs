@@ -8,9 +8,11 @@ use super::table::run_row;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use soda::exec::reference::ReferenceRun;
 use soda::frame::StatesWanted;
 use soda::kernel::trace::RunTrace;
-use soda::kernel::{KernelConfig, RollbackMode, ScheduleSpec};
+use soda::kernel::{KernelConfig, Partition, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::scaling;
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 use soda::sim::{run_scene, ExecutorKind, RunOptions, RunReport};
@@ -190,6 +192,8 @@ fn scalability(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         }
         series.push((format!("{factor} world(s) per thread"), points));
     }
+    bar.set_message("cell costs for the model");
+    model_scalability(&s, steps, &series[0].1, svg)?;
     bar.finish_and_clear();
     charts::line_chart(
         svg,
@@ -198,6 +202,64 @@ fn scalability(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         &series,
     )?;
     Ok(rows)
+}
+
+/// The scalability model (`soda::scaling`) for P = 1..64 worlds on P workers, from the cell
+/// costs of one timed reference run, next to the measured one-world-per-thread speed-ups.
+/// Writes `scalability-model.csv` and `scalability-model.svg` beside `svg`.
+fn model_scalability(s: &Scene, steps: u64, measured: &[(f64, f64)], svg: &Path) -> Result<()> {
+    let (mut run, _) = ReferenceRun::new(s.model(), s.grid(), s.initial_bodies());
+    run.record_costs(true);
+    for _ in 0..steps {
+        run.advance();
+    }
+    let costs = run.take_costs();
+    let grid = s.grid();
+    let positions: Vec<[f32; 3]> = s.bodies.iter().map(|b| b.position.into()).collect();
+    let mut text = String::from(
+        "worlds,sequential_seconds,bulk_synchronous_seconds,dataflow_seconds,\
+         bulk_synchronous_speedup,dataflow_speedup,measured_speedup\n",
+    );
+    let (mut bsp, mut flow) = (Vec::new(), Vec::new());
+    for p in [1usize, 2, 4, 8, 16, 32, 64] {
+        let part = Partition::build(&PartitionKind::Blocks, &grid, p, &positions, 0);
+        let pr = scaling::predict(&grid, &part, &costs, steps);
+        let measured_here = measured
+            .iter()
+            .find(|m| m.0 as usize == p)
+            .map_or(String::new(), |m| f(m.1));
+        text.push_str(&format!(
+            "{},{},{},{},{},{},{}\n",
+            pr.worlds,
+            f(pr.sequential_seconds),
+            f(pr.bulk_synchronous_seconds),
+            f(pr.dataflow_seconds),
+            f(pr.bulk_synchronous_speedup()),
+            f(pr.dataflow_speedup()),
+            measured_here
+        ));
+        bsp.push((p as f64, pr.bulk_synchronous_speedup()));
+        flow.push((p as f64, pr.dataflow_speedup()));
+    }
+    let csv = svg.with_file_name("scalability-model.csv");
+    std::fs::write(&csv, text).with_context(|| format!("cannot write {}", csv.display()))?;
+    let chart = svg.with_file_name("scalability-model.svg");
+    charts::line_chart(
+        &chart,
+        &format!(
+            "MODEL of P worlds on P workers (falling-cubes {}, blocks) and the measured runs",
+            s.bodies.len()
+        ),
+        ("worlds = workers (P)", "speed-up over sequential"),
+        &[
+            ("model: bulk-synchronous (thesis)".into(), bsp),
+            ("model: dataflow, zero overhead".into(), flow),
+            ("measured: threaded".into(), measured.to_vec()),
+        ],
+    )?;
+    println!("wrote {}", csv.display());
+    println!("wrote {}", chart.display());
+    Ok(())
 }
 
 /// Largest cube count at 24 committed steps per second, per executor.

@@ -12,6 +12,18 @@ pub struct ReferenceRun<M: CellModel> {
     grid: Grid,
     state: CellStates<M::State>,
     step: Step,
+    costs: Option<Vec<CellCost>>,
+}
+
+/// The measured cost of one cell computation (for the scalability model, `crate::scaling`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellCost {
+    /// The step computed.
+    pub step: Step,
+    /// The cell (linear index).
+    pub cell: u32,
+    /// Wall time of its `step_cell` call, s.
+    pub seconds: f64,
 }
 
 impl<M: CellModel> ReferenceRun<M> {
@@ -26,9 +38,21 @@ impl<M: CellModel> ReferenceRun<M> {
                 grid,
                 state,
                 step: 0,
+                costs: None,
             },
             events,
         )
+    }
+
+    /// Starts (or stops) timing every cell computation. Timing only observes: the states are
+    /// the same either way.
+    pub fn record_costs(&mut self, on: bool) {
+        self.costs = on.then(Vec::new);
+    }
+
+    /// The cell costs recorded so far, in computation order.
+    pub fn take_costs(&mut self) -> Vec<CellCost> {
+        self.costs.as_mut().map(std::mem::take).unwrap_or_default()
     }
 
     /// The current step.
@@ -68,8 +92,16 @@ impl<M: CellModel> ReferenceRun<M> {
         for i in self.state.occupied() {
             let c = self.grid.coord(i);
             let nb = self.state.neighbourhood(&self.grid, c);
+            let t0 = self.costs.is_some().then(std::time::Instant::now);
             self.model
                 .step_cell(self.step, &self.grid, &nb, &mut next, &mut events);
+            if let (Some(costs), Some(t0)) = (&mut self.costs, t0) {
+                costs.push(CellCost {
+                    step: self.step,
+                    cell: i as u32,
+                    seconds: t0.elapsed().as_secs_f64(),
+                });
+            }
         }
         self.state = CellStates::binned::<M>(&self.grid, next, self.step, &mut events);
         events.sort();
