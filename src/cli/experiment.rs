@@ -215,7 +215,7 @@ fn model_scalability(s: &Scene, steps: u64, measured: &[(f64, f64)], svg: &Path)
     }
     let costs = run.take_costs();
     let grid = s.grid();
-    let positions: Vec<[f32; 3]> = s.bodies.iter().map(|b| b.position.into()).collect();
+    let positions: Vec<[f32; 3]> = s.bodies.iter().map(|b| b.position).collect();
     let mut text = String::from(
         "worlds,sequential_seconds,bulk_synchronous_seconds,dataflow_seconds,\
          bulk_synchronous_speedup,dataflow_speedup,measured_speedup\n",
