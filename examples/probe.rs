@@ -22,6 +22,13 @@ fn main() {
     if let Some(v) = env("SEP") {
         params.max_separation_speed = v;
     }
+    if let Some(v) = env("SLEEP_STEPS") {
+        params.sleep_steps = v as u32;
+    }
+    if let Some(v) = env("SLEEP_SPEED") {
+        params.sleep_speed = v;
+    }
+    let sleep_steps = params.sleep_steps;
     let mut sim = Simulation::new(scene);
     let t = std::time::Instant::now();
     for s in 0..steps {
@@ -46,7 +53,11 @@ fn main() {
                 f.linvel.as_slice(),
                 f.angvel.as_slice()
             );
-            println!("t={:5.1}s bodies={} ke={:.3} vmax={:.3} pen={:.4} ymin={:.3} ymax={:.3} wall={:.2}s", (s + 1) as f32 / 60.0, r.bodies, r.kinetic_energy, r.max_speed, r.max_penetration, r.min_height, r.max_height, t.elapsed().as_secs_f32());
+            let asleep = all
+                .iter()
+                .filter(|b| sleep_steps > 0 && b.rest_steps >= sleep_steps)
+                .count();
+            println!("t={:5.1}s asleep={asleep} bodies={} ke={:.3} vmax={:.3} pen={:.4} ymin={:.3} ymax={:.3} wall={:.2}s", (s + 1) as f32 / 60.0, r.bodies, r.kinetic_energy, r.max_speed, r.max_penetration, r.min_height, r.max_height, t.elapsed().as_secs_f32());
         }
     }
 }

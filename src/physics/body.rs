@@ -133,6 +133,10 @@ pub struct Body {
     pub linvel: Vec3,
     /// Angular velocity, rad/s, world frame.
     pub angvel: Vec3,
+    /// Consecutive steps this body and every partner it touched were quiet (slower than
+    /// `SolverParams::sleep_speed`), saturating at `SolverParams::sleep_steps`; the body is
+    /// asleep when it equals `sleep_steps` (SPEC.md §5.4). Part of the hashed state.
+    pub rest_steps: u32,
 }
 
 impl Body {
@@ -157,12 +161,20 @@ impl Body {
             rotation,
             linvel: Vec3::zeros(),
             angvel: Vec3::zeros(),
+            rest_steps: 0,
         }
     }
 
     /// The body's pose.
     pub fn pose(&self) -> Pose {
         pose(self.position, self.rotation)
+    }
+
+    /// Whether the body and its surface are slower than `speed`: `|v| <= speed` and
+    /// `|ω|·r <= speed` with `r` the bounding radius.
+    pub fn is_quiet(&self, speed: f32) -> bool {
+        self.linvel.norm_squared() <= speed * speed
+            && self.angvel.norm() * self.shape.bounding_radius() <= speed
     }
 
     /// Mass in kg.

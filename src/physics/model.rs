@@ -50,12 +50,16 @@ impl RigidBodyModel {
 
     /// Contact sets of body `own` against the neighbourhood and the environment, in
     /// ascending partner id then static.
+    ///
+    /// Also returns whether every body partner with contact points (those ignored by shock
+    /// propagation included) was quiet at step `t` (sleeping, SPEC.md §5.4).
     fn contact_sets(
         &self,
         own: &Body,
         partners: &[&Body],
         cache: &mut Vec<(BodyId, BodyId, Option<PairManifold>)>,
-    ) -> Vec<ContactSet> {
+    ) -> (Vec<ContactSet>, bool) {
+        let mut partners_quiet = true;
         let cap = self.prediction();
         let (g, margin) = (self.gravity.norm(), self.params.margin);
         let mut sets = Vec::new();
@@ -82,6 +86,7 @@ impl RigidBodyModel {
                 }
             };
             if let Some(m) = m {
+                partners_quiet &= j.is_quiet(self.params.sleep_speed);
                 let mut set = view(own, j, &m);
                 // Shock propagation: a partner resting on `own` (normal pointing down
                 // towards `own`) is ignored; a partner `own` rests on is treated as immovable.
@@ -101,7 +106,33 @@ impl RigidBodyModel {
         if let Some(env) = environment_contacts(own, &self.environment, reach) {
             sets.push(env);
         }
-        sets
+        (sets, partners_quiet)
+    }
+
+    /// Whether sleeping is on (`sleep_steps > 0`).
+    fn sleeping(&self) -> bool {
+        self.params.sleep_steps > 0
+    }
+
+    /// Whether `b` is asleep at step `t` (its rest counter reached `sleep_steps`).
+    pub fn is_asleep(&self, b: &Body) -> bool {
+        self.sleeping() && b.rest_steps >= self.params.sleep_steps
+    }
+
+    /// Whether the awake body `k` can reach the sleeping body `i` during this step (its
+    /// bounding sphere within the pair's speculative distance, SPEC.md §5.2).
+    fn can_reach(&self, i: &Body, k: &Body) -> bool {
+        let (a, b) = if i.id < k.id { (i, k) } else { (k, i) };
+        let cap = self.prediction();
+        let reach = speculative_distance(
+            a,
+            Some(b),
+            self.dt,
+            self.gravity.norm(),
+            self.params.margin,
+            cap,
+        );
+        near(a, b, reach)
     }
 
     /// Applies the speed, displacement and spin caps, raising `SpeedCapped` if any bit.
@@ -131,6 +162,14 @@ impl RigidBodyModel {
     }
 }
 
+/// A sleeping body's next state: the same pose and rest counter, zero velocities.
+fn frozen(b: &Body) -> Body {
+    let mut next = b.clone();
+    next.linvel = Vec3::zeros();
+    next.angvel = Vec3::zeros();
+    next
+}
+
 impl CellModel for RigidBodyModel {
     type State = Body;
 
@@ -150,13 +189,33 @@ impl CellModel for RigidBodyModel {
         out: &mut Vec<Body>,
         events: &mut Vec<Event>,
     ) {
-        let mut partners: Vec<&Body> = nb.iter().collect();
-        partners.sort_by_key(|b| b.id);
+        // Sleeping (SPEC.md §5.4): a sleeping body that no awake body can reach keeps its
+        // pose and has zero velocity; if the whole neighbourhood sleeps, nothing else is done.
+        let awake: Vec<&Body> = nb.iter().filter(|b| !self.is_asleep(b)).collect();
+        if awake.is_empty() {
+            out.extend(nb.own().iter().map(frozen));
+            return;
+        }
+        let mut partners: Vec<&Body> = Vec::new();
         let mut cache = Vec::new();
         for own in nb.own() {
-            let sets = self.contact_sets(own, &partners, &mut cache);
+            if self.is_asleep(own) && !awake.iter().any(|k| self.can_reach(own, k)) {
+                out.push(frozen(own));
+                continue;
+            }
+            if partners.is_empty() {
+                partners = nb.iter().collect();
+                partners.sort_by_key(|b| b.id);
+            }
+            let (sets, partners_quiet) = self.contact_sets(own, &partners, &mut cache);
             let mut next = solve_body(own, &sets, self.gravity, self.dt, &self.params);
             self.cap(own, &mut next, step, events);
+            let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);
+            next.rest_steps = if self.sleeping() && partners_quiet && quiet(own) && quiet(&next) {
+                (own.rest_steps + 1).min(self.params.sleep_steps)
+            } else {
+                0
+            };
             out.push(next);
         }
     }
@@ -171,6 +230,7 @@ impl CellModel for RigidBodyModel {
         for c in [q.w, q.i, q.j, q.k] {
             h.f32(c);
         }
+        h.u32(b.rest_steps);
     }
 
     fn fields(b: &Body) -> Vec<(String, String)> {
@@ -195,6 +255,7 @@ impl CellModel for RigidBodyModel {
                 out.push((format!("{name}.{axis}"), crate::model::exact_f32(v)));
             }
         }
+        out.push(("rest_steps".to_string(), b.rest_steps.to_string()));
         out
     }
 }

@@ -21,6 +21,12 @@ pub struct SolverParams {
     /// Largest separating speed at a contact point that a position correction may leave,
     /// m/s (above restitution's own target).
     pub max_separation_speed: f32,
+    /// Speed below which a body counts as quiet for sleeping, m/s (linear speed, and angular
+    /// speed times the bounding radius).
+    pub sleep_speed: f32,
+    /// Steps a body and its touching partners must stay quiet before it falls asleep; 0
+    /// disables sleeping.
+    pub sleep_steps: u32,
 }
 
 impl Default for SolverParams {
@@ -33,6 +39,8 @@ impl Default for SolverParams {
             max_speed: 30.0,
             max_angular_speed: 60.0,
             max_separation_speed: 0.1,
+            sleep_speed: 0.05,
+            sleep_steps: 30,
         }
     }
 }

@@ -119,6 +119,20 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         100.0,
         "must be between 0 and 100 m/s",
     )?;
+    c.range(
+        "solver.sleep_speed",
+        s.sleep_speed,
+        0.0,
+        100.0,
+        "must be between 0 and 100 m/s",
+    )?;
+    if s.sleep_steps > 1_000_000 {
+        return Err(c.fail(
+            "solver.sleep_steps",
+            s.sleep_steps,
+            "must be between 0 (no sleeping) and 1000000",
+        ));
+    }
     if let Some(e) = scene.cell_edge {
         c.positive("cell_edge", e)?;
     }
