@@ -4,10 +4,9 @@
 //! bar. `--quick` runs a small version in well under a minute (used by the tests).
 
 use super::charts;
-use super::table::run_row;
+use super::table::{csv_line, run_row};
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::exec::reference::ReferenceRun;
 use soda::frame::StatesWanted;
 use soda::kernel::trace::RunTrace;
@@ -16,7 +15,6 @@ use soda::scaling;
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 use soda::sim::{run_scene, ExecutorKind, RunOptions, RunReport};
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 
 /// Examples shown after `soda experiment --help`.
@@ -103,24 +101,11 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
         let mut cols = run_row(&r.report, r.bodies);
         cols.extend(r.extra.iter().cloned());
         if i == 0 {
-            let header: Vec<&str> = cols.iter().map(|c| c.0.as_str()).collect();
-            text.push_str(&(header.join(",") + "\n"));
+            text.push_str(&csv_line(cols.iter().map(|c| &c.0)));
         }
-        let values: Vec<&str> = cols.iter().map(|c| c.1.as_str()).collect();
-        text.push_str(&(values.join(",") + "\n"));
+        text.push_str(&csv_line(cols.iter().map(|c| &c.1)));
     }
     std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
-}
-
-fn progress(runs: u64) -> ProgressBar {
-    if !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::with_draw_target(Some(runs), ProgressDrawTarget::stderr());
-    if let Ok(style) = ProgressStyle::with_template("{bar:40} run {pos}/{len}  {msg}") {
-        bar.set_style(style);
-    }
-    bar
 }
 
 fn scene(name: &str, bodies: usize, seed: u64) -> Result<Scene> {
@@ -158,7 +143,7 @@ fn scalability(quick: bool, svg: &Path) -> Result<Vec<Row>> {
     let s = scene("falling-cubes", bodies, 0)?;
     let max_threads = cores().max(2);
     let world_factors = [1, 2, 4];
-    let bar = progress(1 + (max_threads * world_factors.len()) as u64);
+    let bar = super::output::runs_bar(1 + (max_threads * world_factors.len()) as u64);
     bar.set_message("reference");
     let base = run(&s, &reference(), steps)?;
     bar.inc(1);
@@ -275,7 +260,7 @@ fn raw_performance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
             threaded(threads, threads, RollbackMode::Cell),
         ),
     ];
-    let bar = progress((executors.len() * (rounds + 6)) as u64);
+    let bar = super::output::runs_bar((executors.len() * (rounds + 6)) as u64);
     let mut rows = Vec::new();
     let mut best = Vec::new();
     for (name, options) in &executors {
@@ -340,7 +325,7 @@ fn sync_share(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         RollbackMode::World,
         RollbackMode::Conservative,
     ];
-    let bar = progress(modes.len() as u64);
+    let bar = super::output::runs_bar(modes.len() as u64);
     let parts = ["compute", "rollback", "messages", "gvt", "idle"];
     let mut shares: Vec<Vec<f64>> = vec![Vec::new(); parts.len()];
     let mut rows = Vec::new();
@@ -427,7 +412,7 @@ fn rp_efficiency(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         RollbackMode::World,
         RollbackMode::Conservative,
     ];
-    let bar = progress((scenes.len() * modes.len()) as u64 * seeds);
+    let bar = super::output::runs_bar((scenes.len() * modes.len()) as u64 * seeds);
     let mut rows = Vec::new();
     let mut series: Vec<(String, Vec<f64>)> = modes
         .iter()

@@ -124,9 +124,15 @@ pub fn run(args: &RunArgs) -> Result<()> {
     .with_context(|| format!("the {} executor failed", options.executor.name()))?;
     progress.finish_and_clear();
     let recorded = recorder.map(Recorder::finish).transpose()?;
-    if let Some(path) = &args.output.counters {
+    // The report as JSON, formatted once for --json and --counters.
+    let report_json = if args.output.json || args.output.counters.is_some() {
         let text = serde_json::to_string_pretty(&report).context("cannot format the report")?;
-        std::fs::write(path, text + "\n")
+        text + "\n"
+    } else {
+        String::new()
+    };
+    if let Some(path) = &args.output.counters {
+        std::fs::write(path, &report_json)
             .with_context(|| format!("cannot write the counters to {}", path.display()))?;
     }
     if let Some(path) = &args.output.csv {
@@ -138,8 +144,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
             .with_context(|| format!("cannot write the trace to {}", path.display()))?;
     }
     if args.output.json {
-        let text = serde_json::to_string_pretty(&report).context("cannot format the report")?;
-        print(&(text + "\n"))
+        print(&report_json)
     } else {
         let recorded =
             recorded.map(|(path, frames)| format!("{frames} frames to {}", path.display()));

@@ -3,7 +3,6 @@
 //! spreadsheet or a notebook.
 
 use anyhow::{bail, Context, Result};
-use soda::kernel::PartitionKind;
 use soda::sim::RunReport;
 use std::io::Write;
 use std::path::Path;
@@ -25,7 +24,7 @@ pub fn run_row(report: &RunReport, bodies: usize) -> Vec<(String, String)> {
     put("window", k.map_or(0, |k| k.window).to_string());
     put(
         "partition",
-        k.map_or("none".into(), |k| partition_name(&k.partition).to_string()),
+        k.map_or("none".into(), |k| k.partition.name().to_string()),
     );
     put("steps", report.steps.to_string());
     put("wall_seconds", format!("{:.6}", report.wall_seconds));
@@ -69,8 +68,7 @@ pub fn run_row(report: &RunReport, bodies: usize) -> Vec<(String, String)> {
 /// new or empty. An existing file with a different header is an error (nothing is written).
 pub fn append_run_row(path: &Path, report: &RunReport, bodies: usize) -> Result<()> {
     let row = run_row(report, bodies);
-    let header: Vec<&str> = row.iter().map(|(k, _)| k.as_str()).collect();
-    let header = header.join(",");
+    let header = csv_line(row.iter().map(|(k, _)| k));
     let existing = match std::fs::read_to_string(path) {
         Ok(text) => Some(text),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
@@ -80,8 +78,8 @@ pub fn append_run_row(path: &Path, report: &RunReport, bodies: usize) -> Result<
     };
     let mut text = String::new();
     match existing.as_deref().and_then(|t| t.lines().next()) {
-        None => text.push_str(&(header.clone() + "\n")),
-        Some(first) if first == header => {}
+        None => text.push_str(&header),
+        Some(first) if first == header.trim_end() => {}
         Some(first) => bail!(
             "{} already holds a table with other columns (its header starts `{}`); \
              give --csv a new file name",
@@ -89,8 +87,7 @@ pub fn append_run_row(path: &Path, report: &RunReport, bodies: usize) -> Result<
             first.chars().take(60).collect::<String>()
         ),
     }
-    let values: Vec<String> = row.into_iter().map(|(_, v)| csv_field(&v)).collect();
-    text.push_str(&(values.join(",") + "\n"));
+    text.push_str(&csv_line(row.iter().map(|(_, v)| v)));
     let mut file = std::fs::OpenOptions::new()
         .create(true)
         .append(true)
@@ -100,14 +97,10 @@ pub fn append_run_row(path: &Path, report: &RunReport, bodies: usize) -> Result<
         .with_context(|| format!("cannot append to the CSV file {}", path.display()))
 }
 
-/// The `--partition` name of a partitioner.
-fn partition_name(p: &PartitionKind) -> &'static str {
-    match p {
-        PartitionKind::Blocks => "blocks",
-        PartitionKind::KMeans => "kmeans",
-        PartitionKind::Random => "random",
-        PartitionKind::Explicit(_) => "explicit",
-    }
+/// One CSV line (fields quoted where needed, a line break at the end).
+pub fn csv_line<S: AsRef<str>>(fields: impl IntoIterator<Item = S>) -> String {
+    let fields: Vec<String> = fields.into_iter().map(|f| csv_field(f.as_ref())).collect();
+    fields.join(",") + "\n"
 }
 
 /// A CSV field, quoted when it holds a comma, a quote or a line break.

@@ -8,14 +8,12 @@ use super::output::print;
 use super::source::SceneArgs;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::divergence::{first_difference, Divergence};
 use soda::frame::StatesWanted;
 use soda::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
 use soda::scene::SceneFormat;
 use soda::sim::{run_scene, ExecutorKind, RunOptions};
 use soda::{Body, RigidBodyModel, Scene};
-use std::io::IsTerminal;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -137,7 +135,7 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         reference.hash
     );
     print(&out)?;
-    let progress = progress_bar(checks.len() as u64);
+    let progress = super::output::runs_bar(checks.len() as u64);
     let mut diverged = 0;
     for check in &checks {
         let line = run_check(args, &scene, &scene_args, check, threads, &expected);
@@ -284,7 +282,7 @@ fn reproduce(
         args.worlds,
         check.mode.name(),
         args.window,
-        partition_name(args.partition)
+        PartitionKind::from(args.partition).name()
     );
     match check.seed {
         Some(seed) => cmd += &format!(" --schedule-seed {seed}"),
@@ -300,14 +298,6 @@ fn reproduce(
         cmd += "  (a threaded interleaving may not recur: rerun a few times, or use soda verify)";
     }
     cmd
-}
-
-fn partition_name(p: PartitionArg) -> &'static str {
-    match p {
-        PartitionArg::Blocks => "blocks",
-        PartitionArg::Kmeans => "kmeans",
-        PartitionArg::Random => "random",
-    }
 }
 
 /// Parses `--modes`.
@@ -336,15 +326,4 @@ fn parse_modes(s: &str) -> Result<Vec<RollbackMode>> {
         }
     }
     Ok(modes)
-}
-
-fn progress_bar(len: u64) -> ProgressBar {
-    if !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::stderr());
-    if let Ok(style) = ProgressStyle::with_template("{bar:40} run {pos}/{len}  {elapsed} elapsed") {
-        bar.set_style(style);
-    }
-    bar
 }

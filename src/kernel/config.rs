@@ -67,6 +67,16 @@ impl PartitionKind {
             _ => None,
         }
     }
+
+    /// The name [`parse`](Self::parse) accepts (`explicit` for an explicit owner list).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Blocks => "blocks",
+            Self::KMeans => "kmeans",
+            Self::Random => "random",
+            Self::Explicit(_) => "explicit",
+        }
+    }
 }
 
 /// Who decides, in the virtual executor, which world acts next and which in-flight message
