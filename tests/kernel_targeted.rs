@@ -94,11 +94,14 @@ fn pushing_scene() -> Row {
 fn straggler_ghost_recomputes_exactly_the_dependent_cells() {
     let r = pushing_scene();
     let (mut w1, _) = r.world1_ahead(RollbackMode::Cell, 4);
-    w1.set_trace(true);
+    w1.set_recording(true);
     w1.receive(r.ghost_of_cell_2());
     settle(&mut w1);
     // Only cell 3 depends on cell 2's particle (cell 4 is empty, cell 5 is out of reach).
-    assert_eq!(w1.take_trace(), vec![(0, 3), (1, 3), (2, 3), (3, 3)]);
+    assert_eq!(
+        w1.take_record().recomputations(),
+        vec![(0, 3), (1, 3), (2, 3), (3, 3)]
+    );
     let c = w1.counters();
     assert_eq!((c.rollbacks_primary, c.rollback_length_primary), (1, 4));
     assert_eq!(w1.lvt(), 4);
@@ -108,11 +111,11 @@ fn straggler_ghost_recomputes_exactly_the_dependent_cells() {
 fn world_mode_recomputes_the_whole_territory() {
     let r = pushing_scene();
     let (mut w1, _) = r.world1_ahead(RollbackMode::World, 4);
-    w1.set_trace(true);
+    w1.set_recording(true);
     w1.receive(r.ghost_of_cell_2());
     settle(&mut w1);
     let expected: Vec<(u64, u32)> = (0..4).flat_map(|s| [(s, 3), (s, 5)]).collect();
-    assert_eq!(w1.take_trace(), expected);
+    assert_eq!(w1.take_record().recomputations(), expected);
 }
 
 #[test]
@@ -124,12 +127,12 @@ fn early_cutoff_stops_propagation_when_recomputed_states_are_unchanged() {
     let before: Vec<Vec<Particle>> = (1..=4)
         .map(|t| w1.cell_state(3, t).unwrap().to_vec())
         .collect();
-    w1.set_trace(true);
+    w1.set_recording(true);
     let sent = {
         w1.receive(r.ghost_of_cell_2());
         settle(&mut w1)
     };
-    assert_eq!(w1.take_trace(), vec![(0, 3)]);
+    assert_eq!(w1.take_record().recomputations(), vec![(0, 3)]);
     assert!(
         sent.is_empty(),
         "nothing changed, nothing is re-sent: {sent:?}"

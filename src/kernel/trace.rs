@@ -73,12 +73,11 @@ pub struct StepMessages {
 #[derive(Clone, Debug, Default)]
 pub struct WorldTrace {
     now: f64,
-    last_lvt: Option<Step>,
     lvt: Vec<LvtSample>,
     rollbacks: Vec<RollbackRecord>,
     open: Option<usize>,
     messages: BTreeMap<Step, (u64, u64)>,
-    recomputed: BTreeMap<u32, u64>,
+    recomputations: Vec<(Step, u32)>,
 }
 
 impl WorldTrace {
@@ -89,8 +88,7 @@ impl WorldTrace {
 
     /// Records `lvt` for `world` if it changed since the last sample.
     pub fn sample_lvt(&mut self, world: WorldId, lvt: Step) {
-        if self.last_lvt != Some(lvt) {
-            self.last_lvt = Some(lvt);
+        if self.lvt.last().map(|s| s.lvt) != Some(lvt) {
             self.lvt.push(LvtSample {
                 world,
                 time: self.now,
@@ -115,11 +113,16 @@ impl WorldTrace {
         });
     }
 
-    pub(crate) fn recomputed(&mut self, cell: u32) {
+    pub(crate) fn recomputed(&mut self, step: Step, cell: u32) {
         if let Some(i) = self.open {
             self.rollbacks[i].cells_recomputed += 1;
         }
-        *self.recomputed.entry(cell).or_default() += 1;
+        self.recomputations.push((step, cell));
+    }
+
+    /// Every re-executed cell computation as (step, cell), in the order they ran.
+    pub fn recomputations(&self) -> &[(Step, u32)] {
+        &self.recomputations
     }
 
     pub(crate) fn repaired(&mut self) {
@@ -180,8 +183,8 @@ impl RunTrace {
                 e.0 += pos;
                 e.1 += anti;
             }
-            for (c, n) in p.recomputed {
-                *recomputed.entry(c).or_default() += n;
+            for (_, c) in p.recomputations {
+                *recomputed.entry(c).or_default() += 1;
             }
         }
         lvt.sort_by(|a, b| a.time.total_cmp(&b.time).then(a.world.cmp(&b.world)));

@@ -191,7 +191,6 @@ pub struct World<M: CellModel> {
     inbox: BTreeMap<MessageKey, Message<M::State>>,
     counters: WorldCounters,
     scratch: Vec<M::State>,
-    trace: Option<Vec<(Step, u32)>>,
     record: Option<WorldTrace>,
 }
 
@@ -258,19 +257,8 @@ impl<M: CellModel> World<M> {
             inbox: BTreeMap::new(),
             counters: WorldCounters::default(),
             scratch: Vec::new(),
-            trace: None,
             record: None,
         }
-    }
-
-    /// Starts (or stops) recording every re-executed cell computation as (step, cell).
-    pub fn set_trace(&mut self, on: bool) {
-        self.trace = on.then(Vec::new);
-    }
-
-    /// The re-executed (step, cell) computations recorded since the last call, in order.
-    pub fn take_trace(&mut self) -> Vec<(Step, u32)> {
-        self.trace.as_mut().map(std::mem::take).unwrap_or_default()
     }
 
     /// Starts (or stops) recording this world's part of a run trace ([`WorldTrace`]).
@@ -976,11 +964,8 @@ impl<M: CellModel> World<M> {
                 Out::empty()
             } else {
                 self.counters.cells_recomputed += 1;
-                if let Some(t) = &mut self.trace {
-                    t.push((s, self.cells[x]));
-                }
                 if let Some(r) = &mut self.record {
-                    r.recomputed(self.cells[x]);
+                    r.recomputed(s, self.cells[x]);
                 }
                 self.compute(x, s)
             };
