@@ -60,44 +60,58 @@ pub fn space_time(trace: &RunTrace, path: &Path) -> Result<()> {
     )?;
     for w in 0..trace.worlds as u32 {
         let colour = world_colour(w);
-        // A step line: the LVT holds until the next sample, then jumps (down on a rollback).
-        let mut points = Vec::new();
-        for s in trace.lvt.iter().filter(|s| s.world == w) {
-            if let Some(&(_, last)) = points.last() {
-                points.push((s.time, last));
-            }
-            points.push((s.time, s.lvt));
-        }
+        let lvt = trace.lvt.iter().filter(|s| s.world == w);
+        let points = step_line(lvt.map(|s| (s.time, s.lvt)));
         drawing(
             chart.draw_series(LineSeries::new(points, colour.stroke_width(1))),
             path,
         )?
         .label(format!("world {w}"))
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+        .legend(line_key(colour));
     }
-    let mut gvt = Vec::new();
-    for g in &trace.gvt {
-        if let Some(&(_, last)) = gvt.last() {
-            gvt.push((g.time, last));
-        }
-        gvt.push((g.time, g.gvt));
-    }
+    let gvt = step_line(trace.gvt.iter().map(|g| (g.time, g.gvt)));
     drawing(
         chart.draw_series(LineSeries::new(gvt, BLACK.stroke_width(2))),
         path,
     )?
     .label("GVT")
-    .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLACK));
+    .legend(line_key(BLACK));
+    draw_key(&mut chart, SeriesLabelPosition::UpperLeft, path)?;
+    drawing(root.present(), path)
+}
+
+/// A value that holds until the next sample, then jumps (an LVT drops on a rollback).
+fn step_line<Y: Copy>(samples: impl Iterator<Item = (f64, Y)>) -> Vec<(f64, Y)> {
+    let mut points: Vec<(f64, Y)> = Vec::new();
+    for (t, y) in samples {
+        if let Some(&(_, last)) = points.last() {
+            points.push((t, last));
+        }
+        points.push((t, y));
+    }
+    points
+}
+
+/// The key entry of a line series: a short line in its colour.
+fn line_key(colour: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour)
+}
+
+/// Draws the series key (labels and legends) in a framed box at `position`.
+fn draw_key<'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, SVGBackend<'a>, CT>,
+    position: SeriesLabelPosition,
+    path: &Path,
+) -> Result<()> {
     drawing(
         chart
             .configure_series_labels()
             .border_style(BLACK)
             .background_style(WHITE.mix(0.8))
-            .position(SeriesLabelPosition::UpperLeft)
+            .position(position)
             .draw(),
         path,
-    )?;
-    drawing(root.present(), path)
+    )
 }
 
 /// A top view of the grid (x across, z down): one square per column of cells, filled by
@@ -250,15 +264,7 @@ pub fn bar_chart(
             .label(name.clone())
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colour.filled()));
     }
-    drawing(
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw(),
-        path,
-    )?;
+    draw_key(&mut chart, SeriesLabelPosition::UpperRight, path)?;
     drawing(root.present(), path)
 }
 
@@ -294,7 +300,7 @@ pub fn line_chart(
             path,
         )?
         .label(name.clone())
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+        .legend(line_key(colour));
         drawing(
             chart.draw_series(
                 points
@@ -304,14 +310,6 @@ pub fn line_chart(
             path,
         )?;
     }
-    drawing(
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw(),
-        path,
-    )?;
+    draw_key(&mut chart, SeriesLabelPosition::UpperLeft, path)?;
     drawing(root.present(), path)
 }
