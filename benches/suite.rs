@@ -20,7 +20,10 @@ mod common;
 mod rapier_world;
 
 use common::Footprint;
-use criterion::{criterion_group, criterion_main, Criterion, SamplingMode, Throughput};
+use criterion::measurement::WallTime;
+use criterion::{
+    criterion_group, criterion_main, BenchmarkGroup, Criterion, SamplingMode, Throughput,
+};
 use rapier_world::RapierWorld;
 use soda::frame::StatesWanted;
 use soda::kernel::{KernelConfig, RollbackMode, ScheduleSpec};
@@ -47,27 +50,29 @@ fn options(executor: ExecutorKind, kernel: KernelConfig, threads: usize) -> RunO
     }
 }
 
+/// A group of whole runs: flat sampling, 10 samples, throughput in body-steps.
+fn group<'a>(c: &'a mut Criterion, name: &str) -> BenchmarkGroup<'a, WallTime> {
+    let mut g = c.benchmark_group(name);
+    g.sampling_mode(SamplingMode::Flat)
+        .sample_size(10)
+        .measurement_time(Duration::from_secs(5))
+        .throughput(Throughput::Elements(CUBES as u64 * STEPS));
+    g
+}
+
 fn suite(c: &mut Criterion) {
     let cubes = builtin("falling-cubes", Some(CUBES), 0).unwrap();
     let gas = builtin("sparse-gas", Some(CUBES), 1).unwrap();
     let reference = RunOptions::default();
     let expected = run(&cubes, &reference);
 
-    let mut g = c.benchmark_group("reference_step");
-    g.sampling_mode(SamplingMode::Flat)
-        .sample_size(10)
-        .measurement_time(Duration::from_secs(5))
-        .throughput(Throughput::Elements(CUBES as u64 * STEPS));
+    let mut g = group(c, "reference_step");
     g.bench_function("falling_cubes_1000_30_steps", |b| {
         b.iter(|| black_box(run(&cubes, &reference)))
     });
     g.finish();
 
-    let mut g = c.benchmark_group("executors");
-    g.sampling_mode(SamplingMode::Flat)
-        .sample_size(10)
-        .measurement_time(Duration::from_secs(5))
-        .throughput(Throughput::Elements(CUBES as u64 * STEPS));
+    let mut g = group(c, "executors");
     let fifo = KernelConfig::new(8).schedule(ScheduleSpec::Fifo);
     let runs = [
         ("reference", reference.clone()),
@@ -94,11 +99,7 @@ fn suite(c: &mut Criterion) {
     }
     g.finish();
 
-    let mut g = c.benchmark_group("modes");
-    g.sampling_mode(SamplingMode::Flat)
-        .sample_size(10)
-        .measurement_time(Duration::from_secs(5))
-        .throughput(Throughput::Elements(CUBES as u64 * STEPS));
+    let mut g = group(c, "modes");
     for mode in [
         RollbackMode::Cell,
         RollbackMode::World,
@@ -114,11 +115,7 @@ fn suite(c: &mut Criterion) {
     }
     g.finish();
 
-    let mut g = c.benchmark_group("rapier");
-    g.sampling_mode(SamplingMode::Flat)
-        .sample_size(10)
-        .measurement_time(Duration::from_secs(5))
-        .throughput(Throughput::Elements(CUBES as u64 * STEPS));
+    let mut g = group(c, "rapier");
     let initial = cubes.initial_bodies();
     let footprint = Footprint::of(&initial);
     let pool = rayon::ThreadPoolBuilder::new()
