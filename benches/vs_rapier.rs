@@ -19,7 +19,9 @@
 //! a markdown table and writes it as JSON to target/vs_rapier.json. Without `--bench` (as under
 //! `cargo test --benches`) or with `--test` (`cargo bench -- --test`) it runs a 20-step smoke
 //! version on 1,000 cubes and writes nothing.
-//! `SODA_BENCH_SIZES=1000,8000` selects the sizes (default both).
+//! `SODA_BENCH_SIZES=1000,8000` selects the sizes (default both). `SODA_BENCH_ENGINES=soda`
+//! (or `rapier`) runs one engine only, for quick quality checks; the ratio is then absent.
+//! `SODA_BENCH_STEPS` replaces the 600 steps (e.g. 3600 for 60 simulated seconds).
 
 mod common;
 #[path = "common/rapier_world.rs"]
@@ -76,10 +78,10 @@ struct Comparison {
     dt: f32,
     repetitions: usize,
     footprint: Footprint,
-    soda: EngineResult,
-    rapier: EngineResult,
-    /// SODA's median wall time over Rapier's.
-    ratio_soda_over_rapier: f64,
+    soda: Option<EngineResult>,
+    rapier: Option<EngineResult>,
+    /// SODA's median wall time over Rapier's (when both ran).
+    ratio_soda_over_rapier: Option<f64>,
 }
 
 /// One timed run's outcome: wall time, final hash and the end state.
@@ -235,6 +237,26 @@ fn sizes(full: bool) -> Vec<usize> {
     }
 }
 
+/// Which engines run: `SODA_BENCH_ENGINES` (`soda`, `rapier` or both, comma-separated).
+fn engines() -> (bool, bool) {
+    match std::env::var("SODA_BENCH_ENGINES") {
+        Ok(v) => {
+            let names: Vec<String> = v.split(',').map(|s| s.trim().to_lowercase()).collect();
+            for n in &names {
+                assert!(
+                    n == "soda" || n == "rapier",
+                    "SODA_BENCH_ENGINES: {n:?} is not `soda` or `rapier`"
+                );
+            }
+            (
+                names.iter().any(|n| n == "soda"),
+                names.iter().any(|n| n == "rapier"),
+            )
+        }
+        Err(_) => (true, true),
+    }
+}
+
 fn result(
     engine: &'static str,
     cubes: usize,
@@ -285,11 +307,15 @@ fn compare(cubes: usize, steps: u64, reps: usize, budget: f64) -> Comparison {
         .ground
         .expect("falling-cubes has a ground");
     let (mut soda_runs, mut rapier_runs) = (Vec::new(), Vec::new());
+    let (with_soda, with_rapier) = engines();
     let mut spent = 0.0;
     for rep in 0..reps {
         // Alternate the order so neither engine always runs second (warmer caches, a
         // neighbour's build finishing, ...).
         for soda_turn in [rep % 2 == 0, rep % 2 == 1] {
+            if (soda_turn && !with_soda) || (!soda_turn && !with_rapier) {
+                continue;
+            }
             if soda_turn {
                 let r = run_soda(&scene, steps, rep == 0);
                 eprintln!(
@@ -320,15 +346,21 @@ fn compare(cubes: usize, steps: u64, reps: usize, budget: f64) -> Comparison {
             break;
         }
     }
-    let soda = result("SODA", cubes, steps, &soda_runs, ground_y, &footprint);
-    let rapier = result("Rapier", cubes, steps, &rapier_runs, ground_y, &footprint);
+    let soda = (!soda_runs.is_empty())
+        .then(|| result("SODA", cubes, steps, &soda_runs, ground_y, &footprint));
+    let rapier = (!rapier_runs.is_empty())
+        .then(|| result("Rapier", cubes, steps, &rapier_runs, ground_y, &footprint));
+    let ratio = match (&soda, &rapier) {
+        (Some(s), Some(r)) => Some(s.wall_median_seconds / r.wall_median_seconds),
+        _ => None,
+    };
     Comparison {
         cubes,
         steps,
         dt: scene.dt,
-        repetitions: soda_runs.len(),
+        repetitions: soda_runs.len().max(rapier_runs.len()),
         footprint,
-        ratio_soda_over_rapier: soda.wall_median_seconds / rapier.wall_median_seconds,
+        ratio_soda_over_rapier: ratio,
         soda,
         rapier,
     }
@@ -342,12 +374,12 @@ fn table(rows: &[Comparison]) -> String {
          |---:|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|\n",
     );
     for c in rows {
-        for r in [&c.soda, &c.rapier] {
+        for r in [&c.soda, &c.rapier].into_iter().flatten() {
             let runs: Vec<String> = r.wall_seconds.iter().map(|w| format!("{w:.3}")).collect();
-            let ratio = if r.engine == "SODA" {
-                format!("{:.2}×", c.ratio_soda_over_rapier)
-            } else {
-                "1".into()
+            let ratio = match (r.engine, c.ratio_soda_over_rapier) {
+                ("SODA", Some(x)) => format!("{x:.2}×"),
+                ("SODA", None) => "–".into(),
+                _ => "1".into(),
             };
             let mut notes = Vec::new();
             if let Some(n) = r.asleep {
@@ -383,7 +415,11 @@ fn table(rows: &[Comparison]) -> String {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let full = args.iter().any(|a| a == "--bench") && !args.iter().any(|a| a == "--test");
-    let steps = if full { FULL_STEPS } else { SMOKE_STEPS };
+    let steps = if full {
+        env_or("SODA_BENCH_STEPS", FULL_STEPS)
+    } else {
+        SMOKE_STEPS
+    };
     let reps = if full {
         env_or("SODA_BENCH_REPS", 3usize).max(1)
     } else {

@@ -85,35 +85,29 @@ pub(crate) fn near(a: &Body, b: &Body, distance: f32) -> bool {
 }
 
 /// The manifold of `a` (lower id) and `b` at their step-`t` poses, or `None` if no point
-/// lies within `prediction`.
-pub(crate) fn pair_manifold(a: &Body, b: &Body, prediction: f32) -> Option<PairManifold> {
+/// lies within `reach`. When some point does, every point within `keep` (≥ `reach`) is
+/// kept, so a tilted face lands on all its corners, not only on those already within reach.
+pub(crate) fn pair_manifold(a: &Body, b: &Body, reach: f32, keep: f32) -> Option<PairManifold> {
     debug_assert!(a.id < b.id);
     let (pa, pb) = (a.pose(), b.pose());
     let pos12 = pa.inv_mul(&pb);
     let (sa, sb) = (a.shape.parry(), b.shape.parry());
     let mut m: ContactManifold<(), ()> = ContactManifold::new();
+    let keep = keep.max(reach);
     DefaultQueryDispatcher
-        .contact_manifold_convex_convex(
-            &pos12,
-            sa.as_dyn(),
-            sb.as_dyn(),
-            None,
-            None,
-            prediction,
-            &mut m,
-        )
+        .contact_manifold_convex_convex(&pos12, sa.as_dyn(), sb.as_dyn(), None, None, keep, &mut m)
         .ok()?;
-    if m.points.is_empty() {
+    if !m.points.iter().any(|p| p.dist <= reach) {
         return None;
     }
     let normal_ab = pa.rotation * m.local_n1;
     let local = m
         .points
         .iter()
-        .filter(|p| p.dist <= prediction)
+        .filter(|p| p.dist <= keep)
         .map(|p| (p.local_p1.coords, p.local_p2.coords))
         .collect::<SmallVec<_>>();
-    (!local.is_empty()).then_some(PairManifold { local, normal_ab })
+    Some(PairManifold { local, normal_ab })
 }
 
 /// Body `i`'s view of a pair manifold with partner `j`.
@@ -143,12 +137,15 @@ pub(crate) fn view(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
     }
 }
 
-/// Contacts of body `i` with the static environment within `prediction`, as one set.
+/// Contacts of body `i` with the static environment, as one set: for each surface with a
+/// point within `reach`, every point within `keep` (≥ `reach`; see [`pair_manifold`]).
 pub(crate) fn environment_contacts(
     i: &Body,
     env: &Environment,
-    prediction: f32,
+    reach: f32,
+    keep: f32,
 ) -> Option<ContactSet> {
+    let keep = keep.max(reach);
     let mut points: SmallVec<[ContactPoint; 4]> = SmallVec::new();
     let statik = |anchor: Vec3, partner_point: Vec3, normal: Vec3| ContactPoint {
         anchor,
@@ -160,13 +157,13 @@ pub(crate) fn environment_contacts(
     let radius = i.shape.bounding_radius();
     for plane in &env.planes {
         let centre_gap = plane.normal.dot(&i.position) - plane.offset;
-        if centre_gap > radius + prediction {
+        if centre_gap > radius + reach {
             continue;
         }
         match i.shape {
             Shape::Ball { radius } => {
                 let gap = centre_gap - radius;
-                if gap <= prediction {
+                if gap <= reach {
                     let world = -plane.normal * radius;
                     let anchor = i.rotation.inverse_transform_vector(&world);
                     let contact = i.position + world - plane.normal * gap;
@@ -174,10 +171,16 @@ pub(crate) fn environment_contacts(
                 }
             }
             Shape::Cuboid { .. } => {
+                let mut near_plane: SmallVec<[(Vec3, Vec3, f32); 8]> = SmallVec::new();
                 for v in i.shape.vertices() {
                     let w = i.position + i.rotation * v;
                     let gap = plane.normal.dot(&w) - plane.offset;
-                    if gap <= prediction {
+                    if gap <= keep {
+                        near_plane.push((v, w, gap));
+                    }
+                }
+                if near_plane.iter().any(|&(_, _, gap)| gap <= reach) {
+                    for (v, w, gap) in near_plane {
                         points.push(statik(v, w - plane.normal * gap, plane.normal));
                     }
                 }
@@ -185,8 +188,8 @@ pub(crate) fn environment_contacts(
         }
     }
     for c in &env.cuboids {
-        let reach = radius + c.half_extents.norm() + prediction;
-        if (c.pose.translation.vector - i.position).norm_squared() > reach * reach {
+        let reach_centres = radius + c.half_extents.norm() + reach;
+        if (c.pose.translation.vector - i.position).norm_squared() > reach_centres * reach_centres {
             continue;
         }
         let pi = i.pose();
@@ -195,21 +198,14 @@ pub(crate) fn environment_contacts(
         let sc = parry3d::shape::Cuboid::new(c.half_extents);
         let mut m: ContactManifold<(), ()> = ContactManifold::new();
         if DefaultQueryDispatcher
-            .contact_manifold_convex_convex(
-                &pos12,
-                si.as_dyn(),
-                &sc,
-                None,
-                None,
-                prediction,
-                &mut m,
-            )
+            .contact_manifold_convex_convex(&pos12, si.as_dyn(), &sc, None, None, keep, &mut m)
             .is_err()
+            || !m.points.iter().any(|p| p.dist <= reach)
         {
             continue;
         }
         let normal = -(pi.rotation * m.local_n1);
-        for p in m.points.iter().filter(|p| p.dist <= prediction) {
+        for p in m.points.iter().filter(|p| p.dist <= keep) {
             points.push(statik(
                 p.local_p1.coords,
                 (c.pose * p.local_p2).coords,

@@ -1,6 +1,6 @@
 //! [`RigidBodyModel`]: the rigid-body implementation of [`CellModel`].
 
-use super::body::Body;
+use super::body::{Body, Shape};
 use super::contact::{
     environment_contacts, near, pair_manifold, speculative_distance, view, ContactSet, PairManifold,
 };
@@ -55,39 +55,45 @@ impl RigidBodyModel {
     /// propagation included) was quiet at step `t` (sleeping, SPEC.md §5.4).
     fn contact_sets(
         &self,
-        own: &Body,
-        partners: &[&Body],
+        own: &Candidate<'_>,
+        candidates: &[Candidate<'_>],
         cache: &mut Vec<(BodyId, BodyId, Option<PairManifold>)>,
     ) -> (Vec<ContactSet>, bool) {
         let mut partners_quiet = true;
         let cap = self.prediction();
         let (g, margin) = (self.gravity.norm(), self.params.margin);
+        let slack = self.filter_slack();
         let mut sets = Vec::new();
         let up = if g > 0.0 {
             -self.gravity / g
         } else {
             Vec3::zeros()
         };
-        for &j in partners {
-            if j.id == own.id || !near(own, j, cap) {
+        for c in candidates {
+            if c.body.id == own.body.id || !own.may_touch(c, slack) {
                 continue;
             }
-            let (a, b) = if own.id < j.id { (own, j) } else { (j, own) };
+            let j = c.body;
+            let (a, b) = if own.body.id < j.id {
+                (own.body, j)
+            } else {
+                (j, own.body)
+            };
             let reach = speculative_distance(a, Some(b), self.dt, g, margin, cap);
-            if !near(a, b, reach) {
+            if !near(a, b, reach) || !own.boxes_within(c, reach + slack) {
                 continue;
             }
             let m = match cache.binary_search_by_key(&(a.id, b.id), |e| (e.0, e.1)) {
                 Ok(pos) => cache[pos].2.clone(),
                 Err(pos) => {
-                    let m = pair_manifold(a, b, reach);
+                    let m = pair_manifold(a, b, reach, cap);
                     cache.insert(pos, (a.id, b.id, m.clone()));
                     m
                 }
             };
             if let Some(m) = m {
                 partners_quiet &= j.is_quiet(self.params.sleep_speed);
-                let mut set = view(own, j, &m);
+                let mut set = view(own.body, j, &m);
                 // Shock propagation: a partner resting on `own` (normal pointing down
                 // towards `own`) is ignored; a partner `own` rests on is treated as immovable.
                 let up = set.points[0].normal.dot(&up);
@@ -102,11 +108,17 @@ impl RigidBodyModel {
                 sets.push(set);
             }
         }
-        let reach = speculative_distance(own, None, self.dt, g, margin, cap);
-        if let Some(env) = environment_contacts(own, &self.environment, reach) {
+        let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
+        if let Some(env) = environment_contacts(own.body, &self.environment, reach, cap) {
             sets.push(env);
         }
         (sets, partners_quiet)
+    }
+
+    /// Slack added to the broad-phase filters so that they stay supersets of the exact
+    /// speculative-distance test whatever the rounding (1 mm plus one step of gravity).
+    fn filter_slack(&self) -> f32 {
+        1e-3 + self.params.margin + self.gravity.norm() * self.dt * self.dt
     }
 
     /// Whether sleeping is on (`sleep_steps > 0`).
@@ -162,6 +174,50 @@ impl RigidBodyModel {
     }
 }
 
+/// A body as a broad-phase candidate: its bounding sphere grown by how far its surface can
+/// move in one step, and its world bounding box.
+struct Candidate<'a> {
+    body: &'a Body,
+    /// Bounding radius plus `dt·(|v| + |ω|·r)`, capped at the radius plus the prediction.
+    sweep: f32,
+    /// Half extents of the world axis-aligned box around the shape.
+    half_box: Vec3,
+}
+
+impl<'a> Candidate<'a> {
+    fn new(body: &'a Body, dt: f32, prediction: f32) -> Candidate<'a> {
+        let r = body.shape.bounding_radius();
+        let motion = dt * (body.linvel.norm() + body.angvel.norm() * r);
+        let half_box = match body.shape {
+            Shape::Ball { radius } => Vec3::repeat(radius),
+            Shape::Cuboid { half_extents } => {
+                let m = body.rotation.to_rotation_matrix().into_inner().abs();
+                m * Vec3::from(half_extents)
+            }
+        };
+        Candidate {
+            body,
+            sweep: r + motion.min(prediction),
+            half_box,
+        }
+    }
+
+    /// Whether the two swept spheres (plus `slack`) overlap: a superset of the pairs whose
+    /// bounding spheres lie within their speculative distance (SPEC.md §5.2).
+    fn may_touch(&self, other: &Candidate<'_>, slack: f32) -> bool {
+        let reach = self.sweep + other.sweep + slack;
+        (self.body.position - other.body.position).norm_squared() <= reach * reach
+    }
+
+    /// Whether the world boxes, grown by `distance`, overlap (a pair farther apart than
+    /// `distance` has no contact point within it).
+    fn boxes_within(&self, other: &Candidate<'_>, distance: f32) -> bool {
+        let d = (self.body.position - other.body.position).abs();
+        let limit = self.half_box + other.half_box;
+        (0..3).all(|k| d[k] <= limit[k] + distance)
+    }
+}
+
 /// A sleeping body's next state: the same pose and rest counter, zero velocities.
 fn frozen(b: &Body) -> Body {
     let mut next = b.clone();
@@ -196,18 +252,22 @@ impl CellModel for RigidBodyModel {
             out.extend(nb.own().iter().map(frozen));
             return;
         }
-        let mut partners: Vec<&Body> = Vec::new();
+        let mut candidates: Vec<Candidate<'_>> = Vec::new();
         let mut cache = Vec::new();
         for own in nb.own() {
             if self.is_asleep(own) && !awake.iter().any(|k| self.can_reach(own, k)) {
                 out.push(frozen(own));
                 continue;
             }
-            if partners.is_empty() {
-                partners = nb.iter().collect();
-                partners.sort_by_key(|b| b.id);
+            if candidates.is_empty() {
+                candidates = nb
+                    .iter()
+                    .map(|b| Candidate::new(b, self.dt, self.prediction()))
+                    .collect();
+                candidates.sort_by_key(|c| c.body.id);
             }
-            let (sets, partners_quiet) = self.contact_sets(own, &partners, &mut cache);
+            let me = Candidate::new(own, self.dt, self.prediction());
+            let (sets, partners_quiet) = self.contact_sets(&me, &candidates, &mut cache);
             let mut next = solve_body(own, &sets, self.gravity, self.dt, &self.params);
             self.cap(own, &mut next, step, events);
             let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);

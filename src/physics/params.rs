@@ -10,6 +10,12 @@ pub struct SolverParams {
     pub substeps: u32,
     /// Gauss–Seidel sweeps over one partner's contact points per substep.
     pub sweeps: u32,
+    /// Sequential-impulse iterations of the plastic impact pass per substep (0 turns it
+    /// off): over all of the body's points, each stopping the approach its gap allows.
+    pub impact_iterations: u32,
+    /// Fastest approach, m/s, of the other points of a partner's manifold once one of its
+    /// points touches within a substep (a tilted face lands as a face, not corner first).
+    pub landing_speed: f32,
     /// Relaxation factor applied to the averaged position correction.
     pub relaxation: f32,
     /// Contact margin in metres: extra distance at which contact points are generated.
@@ -34,6 +40,8 @@ impl Default for SolverParams {
         SolverParams {
             substeps: 10,
             sweeps: 2,
+            impact_iterations: 8,
+            landing_speed: 0.3,
             relaxation: 1.0,
             margin: 0.02,
             max_speed: 30.0,

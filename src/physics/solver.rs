@@ -1,12 +1,18 @@
-//! The per-body position-based solve (SPEC.md §Physics). Body `i` advances its own state
-//! through `substeps` substeps; every partner is held on its step-`t` trajectory (its contact
-//! point moving at its step-`t` velocity), so the result reads only step-`t` states.
+//! The per-body solve (SPEC.md §5.3). Body `i` advances its own state through `substeps`
+//! substeps; every partner is held on its step-`t` trajectory (its contact point moving at
+//! its step-`t` velocity), so the result reads only step-`t` states.
+//!
+//! Each substep: a plastic impact pass at velocity level (sequential impulses over the
+//! body's points, so a landing stops the approach without bouncing or spinning), a
+//! position pass that removes what penetration is left, and a velocity pass (restitution,
+//! Coulomb friction, separation cap). The body's world inverse inertia is a 3×3 matrix
+//! computed once per pass, and rotations inside a pass are linearised (`r + δθ × r`).
 
 use super::body::Body;
-use super::contact::{inv_inertia_world, inv_mass_at, ContactSet};
+use super::contact::ContactSet;
 use super::params::SolverParams;
 use crate::math::{Quat, Vec3};
-use nalgebra::Quaternion;
+use nalgebra::{Matrix3, Quaternion};
 
 /// Advances `q` by angular velocity `w` over `h` seconds (first order, renormalised).
 fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
@@ -14,29 +20,52 @@ fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
     Quat::new_normalize(q.quaternion() + dq)
 }
 
-/// Rotates `q` by the small rotation vector `theta`.
-fn apply_rotation(q: &Quat, theta: &Vec3) -> Quat {
-    integrate_rotation(q, theta, 1.0)
+/// The world-frame inverse inertia of `body` at orientation `q`, `R · diag(I⁻¹) · Rᵀ`.
+fn inv_inertia_matrix(body: &Body, q: &Quat) -> Matrix3<f32> {
+    let r = q.to_rotation_matrix().into_inner();
+    r * Matrix3::from_diagonal(&body.inv_inertia) * r.transpose()
 }
 
-/// Angular velocity that takes `q0` to `q1` in `h` seconds.
-fn angular_velocity(q0: &Quat, q1: &Quat, h: f32) -> Vec3 {
-    let d = q1.quaternion() * q0.quaternion().conjugate();
-    let w = d.imag() * (2.0 / h);
-    if d.w < 0.0 {
-        -w
-    } else {
-        w
+/// The frame of one pass: the orientation's matrix and the world inverse inertia.
+struct Frame {
+    rot: Matrix3<f32>,
+    inv_inertia: Matrix3<f32>,
+    inv_mass: f32,
+}
+
+impl Frame {
+    fn new(body: &Body, q: &Quat) -> Frame {
+        Frame {
+            rot: q.to_rotation_matrix().into_inner(),
+            inv_inertia: inv_inertia_matrix(body, q),
+            inv_mass: body.inv_mass,
+        }
+    }
+
+    /// Generalised inverse mass for a unit impulse along `n` at offset `r`.
+    fn inv_mass_at(&self, r: &Vec3, n: &Vec3) -> f32 {
+        let rn = r.cross(n);
+        self.inv_mass + rn.dot(&(self.inv_inertia * rn))
     }
 }
 
 /// Per-point scratch kept across one substep.
 #[derive(Clone, Copy, Default)]
 struct PointScratch {
-    /// Normal position impulse (mass-weighted, m·kg) applied this substep.
+    /// Normal impulse accumulated by the impact pass (N·s).
+    impulse: f32,
+    /// Normal position impulse (mass-weighted, m·kg) applied by the position pass.
     lambda: f32,
-    /// Relative normal velocity at the start of the substep.
+    /// Normal velocity of the point relative to the partner at the start of the substep.
     approach: f32,
+    /// Gap at the start of the substep to the partner's point one substep ahead.
+    gap0: f32,
+}
+
+/// Applies impulse `imp` at offset `r` to the velocities `v`, `w`.
+fn apply_impulse(f: &Frame, v: &mut Vec3, w: &mut Vec3, r: &Vec3, imp: &Vec3) {
+    *v += imp * f.inv_mass;
+    *w += f.inv_inertia * r.cross(imp);
 }
 
 /// Advances `body` by one step of `dt` seconds against the contact sets (ascending partner
@@ -51,53 +80,115 @@ pub(crate) fn solve_body(
     let n_sub = p.substeps.max(1);
     let h = dt / n_sub as f32;
     let mut b = body.clone();
+    if sets.is_empty() {
+        // Free flight: no contact can act within the step.
+        for _ in 0..n_sub {
+            b.linvel += gravity * h;
+            b.position += b.linvel * h;
+            b.rotation = integrate_rotation(&b.rotation, &b.angvel, h);
+        }
+        return b;
+    }
     let count: usize = sets.iter().map(|s| s.points.len()).sum();
     let mut scratch = vec![PointScratch::default(); count];
+    let mut offsets = vec![Vec3::zeros(); count];
+    let mut engaged_sets = vec![false; sets.len()];
     let rest_threshold = 2.0 * gravity.norm() * h;
 
     for _ in 0..n_sub {
-        // Relative normal velocity before the substep (for restitution).
+        // Start of the substep: offsets, approach speeds (for restitution).
+        let f0 = Frame::new(&b, &b.rotation);
         let mut k = 0;
         for set in sets {
             for cp in &set.points {
-                let r = b.rotation * cp.anchor;
+                let r = f0.rot * cp.anchor;
                 let vi = b.linvel + b.angvel.cross(&r);
+                offsets[k] = r;
                 scratch[k] = PointScratch {
+                    impulse: 0.0,
                     lambda: 0.0,
                     approach: cp.normal.dot(&(vi - cp.partner_velocity)),
+                    gap0: 0.0,
                 };
                 k += 1;
             }
         }
-        // Predict.
-        let x0 = b.position;
-        let q0 = b.rotation;
         b.linvel += gravity * h;
-        let xp = x0 + b.linvel * h;
-        let qp = integrate_rotation(&q0, &b.angvel, h);
+
+        // Impact pass: sequential impulses so that no point closes more than its current
+        // gap within the substep (plastic: an approach is stopped, never reflected here).
+        // Once a point of a partner's manifold would touch within the substep, the other
+        // points of that manifold may approach at most `landing_speed`: a tilted face lands
+        // as a face, not corner first (which would turn the fall into spin).
+        let mut k = 0;
+        for (s, set) in sets.iter().enumerate() {
+            let mut engaged = false;
+            for cp in &set.points {
+                let r = offsets[k];
+                let pj = cp.partner_point + cp.partner_velocity * h;
+                let gap0 = cp.normal.dot(&(b.position + r - pj));
+                let vn = cp.normal.dot(&(b.linvel + b.angvel.cross(&r)));
+                engaged |= gap0 + vn * h < 0.0;
+                scratch[k].gap0 = gap0;
+                k += 1;
+            }
+            engaged_sets[s] = engaged;
+        }
+        for _ in 0..p.impact_iterations {
+            let mut k = 0;
+            for (s, set) in sets.iter().enumerate() {
+                let limit = if engaged_sets[s] {
+                    p.landing_speed
+                } else {
+                    f32::INFINITY
+                };
+                for cp in &set.points {
+                    let r = offsets[k];
+                    let gap0 = scratch[k].gap0;
+                    let vn = cp.normal.dot(&(b.linvel + b.angvel.cross(&r)));
+                    let target = -(gap0.max(0.0) / h).min(limit);
+                    let w = f0.inv_mass_at(&r, &cp.normal) + cp.partner_inv_mass;
+                    let acc = scratch[k].impulse;
+                    let next = (acc + (target - vn) / w).max(0.0);
+                    if next != acc {
+                        let imp = cp.normal * (next - acc);
+                        apply_impulse(&f0, &mut b.linvel, &mut b.angvel, &r, &imp);
+                        scratch[k].impulse = next;
+                    }
+                    k += 1;
+                }
+            }
+        }
+
+        // Predict.
+        let xp = b.position + b.linvel * h;
+        let qp = integrate_rotation(&b.rotation, &b.angvel, h);
+        let fp = Frame::new(&b, &qp);
 
         // Position pass: each partner separately from the predicted pose (Gauss–Seidel over
-        // its points), corrections averaged over the partners that corrected anything.
+        // its points, rotation linearised), corrections averaged over the partners that
+        // corrected anything.
         let mut sum_dx = Vec3::zeros();
         let mut sum_dtheta = Vec3::zeros();
         let mut active = 0u32;
         let mut k = 0;
         for set in sets {
-            let mut x = xp;
-            let mut q = qp;
+            let mut dx = Vec3::zeros();
+            let mut dtheta = Vec3::zeros();
             let mut touched = false;
             for _ in 0..p.sweeps.max(1) {
                 for (m, cp) in set.points.iter().enumerate() {
-                    let r = q * cp.anchor;
-                    let pi = x + r;
+                    let r0 = fp.rot * cp.anchor;
+                    let r = r0 + dtheta.cross(&r0);
+                    let pi = xp + dx + r;
                     let pj = cp.partner_point + cp.partner_velocity * h;
                     let gap = cp.normal.dot(&(pi - pj));
                     if gap < 0.0 {
-                        let w = inv_mass_at(&b, &q, &r, &cp.normal) + cp.partner_inv_mass;
+                        let w = fp.inv_mass_at(&r, &cp.normal) + cp.partner_inv_mass;
                         let dl = -gap / w;
                         let imp = cp.normal * dl;
-                        x += imp * b.inv_mass;
-                        q = apply_rotation(&q, &inv_inertia_world(&b, &q, &r.cross(&imp)));
+                        dx += imp * fp.inv_mass;
+                        dtheta += fp.inv_inertia * r.cross(&imp);
                         scratch[k + m].lambda += dl;
                         touched = true;
                     }
@@ -106,18 +197,20 @@ pub(crate) fn solve_body(
             k += set.points.len();
             if touched {
                 active += 1;
-                sum_dx += x - xp;
-                sum_dtheta += angular_velocity(&qp, &q, 1.0);
+                sum_dx += dx;
+                sum_dtheta += dtheta;
             }
         }
-        let (x1, q1) = if active > 0 {
+        let (x1, q1, dtheta) = if active > 0 {
             let scale = p.relaxation / active as f32;
+            let dtheta = sum_dtheta * scale;
             (
                 xp + sum_dx * scale,
-                apply_rotation(&qp, &(sum_dtheta * scale)),
+                integrate_rotation(&qp, &dtheta, 1.0),
+                dtheta,
             )
         } else {
-            (xp, qp)
+            (xp, qp, Vec3::zeros())
         };
         // The velocity a correction adds may cancel the approach but not fling the body:
         // along its own direction it is capped at the predicted velocity it opposes plus the
@@ -134,7 +227,7 @@ pub(crate) fn solve_body(
             }
         }
         let speed_cap = v_pred.norm() + p.max_separation_speed;
-        let mut dw = angular_velocity(&qp, &q1, h);
+        let mut dw = dtheta / h;
         let dw_cap = w_pred.norm() + speed_cap / body.shape.bounding_radius();
         if dw.norm() > dw_cap {
             dw *= dw_cap / dw.norm();
@@ -144,17 +237,20 @@ pub(crate) fn solve_body(
         b.linvel = v_pred + dv;
         b.angvel = w_pred + dw;
 
-        // Velocity pass: per active point, remove approach velocity (or reflect it with the
-        // restitution) and apply Coulomb friction bounded by the normal impulse.
+        // Velocity pass: per point that pushed in this substep, remove approach velocity
+        // (or reflect it with the restitution) and apply Coulomb friction bounded by the
+        // point's normal impulse.
+        let f1 = Frame::new(&b, &q1);
         let mut k = 0;
         for set in sets {
             for cp in &set.points {
                 let sc = scratch[k];
                 k += 1;
-                if sc.lambda <= 0.0 {
+                let normal_impulse = sc.impulse + sc.lambda / h;
+                if normal_impulse <= 0.0 {
                     continue;
                 }
-                let r = b.rotation * cp.anchor;
+                let r = f1.rot * cp.anchor;
                 let vrel = b.linvel + b.angvel.cross(&r) - cp.partner_velocity;
                 let vn = cp.normal.dot(&vrel);
                 let vt = vrel - cp.normal * vn;
@@ -170,28 +266,25 @@ pub(crate) fn solve_body(
                     // Depenetration must not fling bodies: the separating speed a position
                     // correction produced is capped (the whole excess is removed on i's side).
                     let excess = vn - target.max(p.max_separation_speed);
-                    let w_i = inv_mass_at(&b, &b.rotation, &r, &cp.normal);
+                    let w_i = f1.inv_mass_at(&r, &cp.normal);
                     let imp = -cp.normal * (excess / w_i);
-                    b.linvel += imp * b.inv_mass;
-                    b.angvel += inv_inertia_world(&b, &b.rotation, &r.cross(&imp));
+                    apply_impulse(&f1, &mut b.linvel, &mut b.angvel, &r, &imp);
                 }
                 let vt_len = vt.norm();
                 if vt_len > 0.0 {
-                    let cap = set.friction * sc.lambda / h;
-                    let w_t = inv_mass_at(&b, &b.rotation, &r, &(vt / vt_len));
+                    let cap = set.friction * normal_impulse;
+                    let w_t = f1.inv_mass_at(&r, &(vt / vt_len));
                     let wt_total = w_t + cp.partner_inv_mass;
                     // Velocity change that would stop slip, limited by the friction cone.
-                    let stop = vt_len;
                     let limit = cap * wt_total;
-                    dv -= vt / vt_len * stop.min(limit);
+                    dv -= vt / vt_len * vt_len.min(limit);
                 }
                 if dv != Vec3::zeros() {
                     let dir_len = dv.norm();
                     let dir = dv / dir_len;
-                    let w = inv_mass_at(&b, &b.rotation, &r, &dir) + cp.partner_inv_mass;
+                    let w = f1.inv_mass_at(&r, &dir) + cp.partner_inv_mass;
                     let imp = dir * (dir_len / w);
-                    b.linvel += imp * b.inv_mass;
-                    b.angvel += inv_inertia_world(&b, &b.rotation, &r.cross(&imp));
+                    apply_impulse(&f1, &mut b.linvel, &mut b.angvel, &r, &imp);
                 }
             }
         }

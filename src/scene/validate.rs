@@ -96,6 +96,13 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
     if !(1..=100).contains(&s.sweeps) {
         return Err(c.fail("solver.sweeps", s.sweeps, "must be between 1 and 100"));
     }
+    if s.impact_iterations > 100 {
+        return Err(c.fail(
+            "solver.impact_iterations",
+            s.impact_iterations,
+            "must be between 0 (no impact pass) and 100",
+        ));
+    }
     c.range(
         "solver.relaxation",
         s.relaxation,
