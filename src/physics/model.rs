@@ -12,6 +12,7 @@ use crate::grid::Grid;
 use crate::hash::StateHash;
 use crate::math::Vec3;
 use crate::model::{BodyId, CellModel, Neighbourhood, Step};
+use std::cell::OnceCell;
 
 /// Cosine of the largest angle between a contact normal and the vertical for which the
 /// contact counts as support (shock propagation, SPEC.md §Physics): 45°.
@@ -70,7 +71,10 @@ impl RigidBodyModel {
             Vec3::zeros()
         };
         for c in candidates {
-            if c.body.id == own.body.id || !own.may_touch(c, slack) {
+            if c.body.id == own.body.id
+                || !own.may_touch(c, slack)
+                || !own.boxes_within(c, own.motion + c.motion + slack)
+            {
                 continue;
             }
             let j = c.body;
@@ -108,6 +112,7 @@ impl RigidBodyModel {
                 sets.push(set);
             }
         }
+        sets.sort_unstable_by_key(|s| s.partner);
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
         if let Some(env) = environment_contacts(own.body, &self.environment, reach, cap) {
             sets.push(env);
@@ -175,31 +180,40 @@ impl RigidBodyModel {
 }
 
 /// A body as a broad-phase candidate: its bounding sphere grown by how far its surface can
-/// move in one step, and its world bounding box.
+/// move in one step.
 struct Candidate<'a> {
     body: &'a Body,
-    /// Bounding radius plus `dt·(|v| + |ω|·r)`, capped at the radius plus the prediction.
+    /// `dt·(|v| + |ω|·r)` (the farthest any surface point moves in the step), at most the
+    /// prediction.
+    motion: f32,
+    /// Bounding radius plus `motion`.
     sweep: f32,
-    /// Half extents of the world axis-aligned box around the shape.
-    half_box: Vec3,
+    /// Half extents of the world axis-aligned box around the shape, computed on first use.
+    half_box: OnceCell<Vec3>,
 }
 
 impl<'a> Candidate<'a> {
     fn new(body: &'a Body, dt: f32, prediction: f32) -> Candidate<'a> {
         let r = body.shape.bounding_radius();
         let motion = dt * (body.linvel.norm() + body.angvel.norm() * r);
-        let half_box = match body.shape {
-            Shape::Ball { radius } => Vec3::repeat(radius),
-            Shape::Cuboid { half_extents } => {
-                let m = body.rotation.to_rotation_matrix().into_inner().abs();
-                m * Vec3::from(half_extents)
-            }
-        };
+        let motion = motion.min(prediction);
         Candidate {
             body,
-            sweep: r + motion.min(prediction),
-            half_box,
+            motion,
+            sweep: r + motion,
+            half_box: OnceCell::new(),
         }
+    }
+
+    /// Half extents of the world axis-aligned box around the shape.
+    fn half_box(&self) -> Vec3 {
+        *self.half_box.get_or_init(|| match self.body.shape {
+            Shape::Ball { radius } => Vec3::repeat(radius),
+            Shape::Cuboid { half_extents } => {
+                let m = self.body.rotation.to_rotation_matrix().into_inner().abs();
+                m * Vec3::from(half_extents)
+            }
+        })
     }
 
     /// Whether the two swept spheres (plus `slack`) overlap: a superset of the pairs whose
@@ -213,7 +227,7 @@ impl<'a> Candidate<'a> {
     /// `distance` has no contact point within it).
     fn boxes_within(&self, other: &Candidate<'_>, distance: f32) -> bool {
         let d = (self.body.position - other.body.position).abs();
-        let limit = self.half_box + other.half_box;
+        let limit = self.half_box() + other.half_box();
         (0..3).all(|k| d[k] <= limit[k] + distance)
     }
 }
@@ -247,24 +261,27 @@ impl CellModel for RigidBodyModel {
     ) {
         // Sleeping (SPEC.md §5.4): a sleeping body that no awake body can reach keeps its
         // pose and has zero velocity; if the whole neighbourhood sleeps, nothing else is done.
-        let awake: Vec<&Body> = nb.iter().filter(|b| !self.is_asleep(b)).collect();
-        if awake.is_empty() {
+        if nb.iter().all(|b| self.is_asleep(b)) {
             out.extend(nb.own().iter().map(frozen));
             return;
         }
         let mut candidates: Vec<Candidate<'_>> = Vec::new();
         let mut cache = Vec::new();
         for own in nb.own() {
-            if self.is_asleep(own) && !awake.iter().any(|k| self.can_reach(own, k)) {
+            if self.is_asleep(own)
+                && !nb
+                    .iter()
+                    .any(|k| !self.is_asleep(k) && self.can_reach(own, k))
+            {
                 out.push(frozen(own));
                 continue;
             }
             if candidates.is_empty() {
+                // Slot order: the sets are put in ascending partner id afterwards.
                 candidates = nb
                     .iter()
                     .map(|b| Candidate::new(b, self.dt, self.prediction()))
                     .collect();
-                candidates.sort_by_key(|c| c.body.id);
             }
             let me = Candidate::new(own, self.dt, self.prediction());
             let (sets, partners_quiet) = self.contact_sets(&me, &candidates, &mut cache);

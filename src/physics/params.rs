@@ -38,7 +38,7 @@ pub struct SolverParams {
 impl Default for SolverParams {
     fn default() -> Self {
         SolverParams {
-            substeps: 10,
+            substeps: 2,
             sweeps: 2,
             impact_iterations: 8,
             landing_speed: 0.3,

@@ -14,6 +14,10 @@ use super::params::SolverParams;
 use crate::math::{Quat, Vec3};
 use nalgebra::{Matrix3, Quaternion};
 
+/// The impact pass stops iterating once no point's normal velocity changed by more than
+/// this in one iteration, m/s.
+const IMPACT_TOLERANCE: f32 = 1e-4;
+
 /// Advances `q` by angular velocity `w` over `h` seconds (first order, renormalised).
 fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
     let dq = Quaternion::new(0.0, w.x, w.y, w.z) * q.quaternion() * (0.5 * h);
@@ -135,6 +139,7 @@ pub(crate) fn solve_body(
             engaged_sets[s] = engaged;
         }
         for _ in 0..p.impact_iterations {
+            let mut largest_change = 0.0f32;
             let mut k = 0;
             for (s, set) in sets.iter().enumerate() {
                 let limit = if engaged_sets[s] {
@@ -154,9 +159,14 @@ pub(crate) fn solve_body(
                         let imp = cp.normal * (next - acc);
                         apply_impulse(&f0, &mut b.linvel, &mut b.angvel, &r, &imp);
                         scratch[k].impulse = next;
+                        largest_change = largest_change.max((next - acc).abs() * w);
                     }
                     k += 1;
                 }
+            }
+            // Converged: no point's velocity changed by more than 0.1 mm/s.
+            if largest_change < IMPACT_TOLERANCE {
+                break;
             }
         }
 
