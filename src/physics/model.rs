@@ -2,7 +2,8 @@
 
 use super::body::{Body, Shape};
 use super::contact::{
-    environment_contacts, near, pair_manifold, speculative_distance, view, ContactSet, PairManifold,
+    environment_contacts, keep_distance, near, pair_manifold, speculative_distance, view,
+    ContactSet, PairManifold,
 };
 use super::environment::Environment;
 use super::params::SolverParams;
@@ -90,7 +91,13 @@ impl RigidBodyModel {
             let m = match cache.binary_search_by_key(&(a.id, b.id), |e| (e.0, e.1)) {
                 Ok(pos) => cache[pos].2.clone(),
                 Err(pos) => {
-                    let m = pair_manifold(a, b, reach, cap);
+                    let keep = keep_distance(
+                        reach,
+                        a.shape.bounding_radius(),
+                        b.shape.bounding_radius(),
+                        cap,
+                    );
+                    let m = pair_manifold(a, b, reach, keep);
                     cache.insert(pos, (a.id, b.id, m.clone()));
                     m
                 }
@@ -114,7 +121,13 @@ impl RigidBodyModel {
         }
         sets.sort_unstable_by_key(|s| s.partner);
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
-        if let Some(env) = environment_contacts(own.body, &self.environment, reach, cap) {
+        let radius = own.body.shape.bounding_radius();
+        if let Some(env) = environment_contacts(
+            own.body,
+            &self.environment,
+            reach,
+            keep_distance(reach, radius, radius, cap),
+        ) {
             sets.push(env);
         }
         (sets, partners_quiet)
@@ -277,10 +290,25 @@ impl CellModel for RigidBodyModel {
                 continue;
             }
             if candidates.is_empty() {
-                // Slot order: the sets are put in ascending partner id afterwards.
+                // Only bodies whose swept sphere can reach the box around the centre cell's
+                // swept bodies; slot order (the sets are put in ascending partner id later).
+                let (lo, hi, own_sweep) = nb.own().iter().fold(
+                    (Vec3::repeat(f32::MAX), Vec3::repeat(f32::MIN), 0.0f32),
+                    |(lo, hi, w), b| {
+                        let c = Candidate::new(b, self.dt, self.prediction());
+                        (lo.inf(&b.position), hi.sup(&b.position), w.max(c.sweep))
+                    },
+                );
+                let grow = own_sweep + self.filter_slack();
                 candidates = nb
                     .iter()
                     .map(|b| Candidate::new(b, self.dt, self.prediction()))
+                    .filter(|c| {
+                        let p = c.body.position;
+                        (0..3).all(|k| {
+                            p[k] >= lo[k] - grow - c.sweep && p[k] <= hi[k] + grow + c.sweep
+                        })
+                    })
                     .collect();
             }
             let me = Candidate::new(own, self.dt, self.prediction());

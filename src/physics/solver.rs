@@ -62,8 +62,33 @@ struct PointScratch {
     lambda: f32,
     /// Normal velocity of the point relative to the partner at the start of the substep.
     approach: f32,
-    /// Gap at the start of the substep to the partner's point one substep ahead.
-    gap0: f32,
+}
+
+/// One point's row of the position pass, fixed for a substep (at the predicted pose).
+#[derive(Clone, Copy, Default)]
+struct PositionRow {
+    /// The point's offset from the centre at the predicted pose.
+    offset: Vec3,
+    /// `I⁻¹ (r × n)`: the rotation a unit normal position impulse adds.
+    irn: Vec3,
+    /// Inverse of the generalised inverse mass along the normal, partner included.
+    inv_w: f32,
+    /// Gap at the predicted pose to the partner's point one substep ahead, m.
+    gap: f32,
+}
+
+/// One point's row of the impact pass, fixed for a substep.
+#[derive(Clone, Copy, Default)]
+struct ImpactRow {
+    /// `r × n`: the angular part of the normal direction.
+    rn: Vec3,
+    /// `I⁻¹ (r × n)`: the spin a unit normal impulse adds.
+    irn: Vec3,
+    /// Generalised inverse mass along the normal, partner included, and its inverse.
+    w: f32,
+    inv_w: f32,
+    /// Approach speed the gap allows within the substep, m/s.
+    gap_speed: f32,
 }
 
 /// Applies impulse `imp` at offset `r` to the velocities `v`, `w`.
@@ -96,6 +121,8 @@ pub(crate) fn solve_body(
     let count: usize = sets.iter().map(|s| s.points.len()).sum();
     let mut scratch = vec![PointScratch::default(); count];
     let mut offsets = vec![Vec3::zeros(); count];
+    let mut impact = vec![ImpactRow::default(); count];
+    let mut position = vec![PositionRow::default(); count];
     let mut engaged_sets = vec![false; sets.len()];
     let rest_threshold = 2.0 * gravity.norm() * h;
 
@@ -112,7 +139,6 @@ pub(crate) fn solve_body(
                     impulse: 0.0,
                     lambda: 0.0,
                     approach: cp.normal.dot(&(vi - cp.partner_velocity)),
-                    gap0: 0.0,
                 };
                 k += 1;
             }
@@ -133,7 +159,15 @@ pub(crate) fn solve_body(
                 let gap0 = cp.normal.dot(&(b.position + r - pj));
                 let vn = cp.normal.dot(&(b.linvel + b.angvel.cross(&r)));
                 engaged |= gap0 + vn * h < 0.0;
-                scratch[k].gap0 = gap0;
+                let rn = r.cross(&cp.normal);
+                let irn = f0.inv_inertia * rn;
+                impact[k] = ImpactRow {
+                    rn,
+                    irn,
+                    inv_w: 1.0 / (f0.inv_mass + rn.dot(&irn) + cp.partner_inv_mass),
+                    w: f0.inv_mass + rn.dot(&irn) + cp.partner_inv_mass,
+                    gap_speed: gap0.max(0.0) / h,
+                };
                 k += 1;
             }
             engaged_sets[s] = engaged;
@@ -148,18 +182,18 @@ pub(crate) fn solve_body(
                     f32::INFINITY
                 };
                 for cp in &set.points {
-                    let r = offsets[k];
-                    let gap0 = scratch[k].gap0;
-                    let vn = cp.normal.dot(&(b.linvel + b.angvel.cross(&r)));
-                    let target = -(gap0.max(0.0) / h).min(limit);
-                    let w = f0.inv_mass_at(&r, &cp.normal) + cp.partner_inv_mass;
+                    let row = &impact[k];
+                    // n·(v + ω × r) = n·v + ω·(r × n).
+                    let vn = cp.normal.dot(&b.linvel) + b.angvel.dot(&row.rn);
+                    let target = -row.gap_speed.min(limit);
                     let acc = scratch[k].impulse;
-                    let next = (acc + (target - vn) / w).max(0.0);
+                    let next = (acc + (target - vn) * row.inv_w).max(0.0);
                     if next != acc {
-                        let imp = cp.normal * (next - acc);
-                        apply_impulse(&f0, &mut b.linvel, &mut b.angvel, &r, &imp);
+                        let d = next - acc;
+                        b.linvel += cp.normal * (d * f0.inv_mass);
+                        b.angvel += row.irn * d;
                         scratch[k].impulse = next;
-                        largest_change = largest_change.max((next - acc).abs() * w);
+                        largest_change = largest_change.max(d.abs() * row.w);
                     }
                     k += 1;
                 }
@@ -186,19 +220,26 @@ pub(crate) fn solve_body(
             let mut dx = Vec3::zeros();
             let mut dtheta = Vec3::zeros();
             let mut touched = false;
+            for (m, cp) in set.points.iter().enumerate() {
+                let r0 = fp.rot * cp.anchor;
+                let rn = r0.cross(&cp.normal);
+                let irn = fp.inv_inertia * rn;
+                let pj = cp.partner_point + cp.partner_velocity * h;
+                position[k + m] = PositionRow {
+                    offset: r0,
+                    irn,
+                    inv_w: 1.0 / (fp.inv_mass + rn.dot(&irn) + cp.partner_inv_mass),
+                    gap: cp.normal.dot(&(xp + r0 - pj)),
+                };
+            }
             for _ in 0..p.sweeps.max(1) {
                 for (m, cp) in set.points.iter().enumerate() {
-                    let r0 = fp.rot * cp.anchor;
-                    let r = r0 + dtheta.cross(&r0);
-                    let pi = xp + dx + r;
-                    let pj = cp.partner_point + cp.partner_velocity * h;
-                    let gap = cp.normal.dot(&(pi - pj));
+                    let row = &position[k + m];
+                    let gap = row.gap + cp.normal.dot(&(dx + dtheta.cross(&row.offset)));
                     if gap < 0.0 {
-                        let w = fp.inv_mass_at(&r, &cp.normal) + cp.partner_inv_mass;
-                        let dl = -gap / w;
-                        let imp = cp.normal * dl;
-                        dx += imp * fp.inv_mass;
-                        dtheta += fp.inv_inertia * r.cross(&imp);
+                        let dl = -gap * row.inv_w;
+                        dx += cp.normal * (dl * fp.inv_mass);
+                        dtheta += row.irn * dl;
                         scratch[k + m].lambda += dl;
                         touched = true;
                     }
