@@ -167,15 +167,34 @@ fn same_scene_twice_gives_the_same_hash_sequence() {
     assert_eq!(run(scene.clone()), run(scene));
 }
 
-/// Issue 2's settling bar for 1,000 falling cubes after 10 simulated seconds.
-#[test]
-fn falling_cubes_1000_settle_within_ten_seconds() {
-    let scene = soda::scene::builtin::builtin("falling-cubes", Some(1000), 0).unwrap();
+/// Largest x/z distance of any body centre outside the x/z rectangle of the initial centres.
+fn farthest_outside_footprint(initial: &[soda::Body], now: &[&soda::Body]) -> f32 {
+    let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for b in initial {
+        for (k, v) in [b.position.x, b.position.z].into_iter().enumerate() {
+            lo[k] = lo[k].min(v);
+            hi[k] = hi[k].max(v);
+        }
+    }
+    now.iter()
+        .map(|b| {
+            let d = |v: f32, k: usize| (lo[k] - v).max(v - hi[k]).max(0.0);
+            d(b.position.x, 0).hypot(d(b.position.z, 1))
+        })
+        .fold(0.0, f32::max)
+}
+
+/// Issue 3's pile bar for `falling-cubes` of `n` cubes after 10 simulated seconds: nothing
+/// lost, max speed ≤ 0.2 m/s, exact penetration ≤ 2 cm, no cube below the ground, none more
+/// than 2 m outside the lattice's footprint, the top of the columns at `top ± 0.5` m.
+fn assert_falling_cubes_stand(n: usize, top: f32) {
+    let scene = soda::scene::builtin::builtin("falling-cubes", Some(n), 0).unwrap();
+    let initial = scene.initial_bodies();
     let mut sim = Simulation::new(scene);
     let report = sim.run(600, |_, _| {});
     let r = &report.last;
     assert_eq!(report.left_domain_events, 0, "bodies left the domain");
-    assert_eq!(r.bodies, 1000);
+    assert_eq!(r.bodies, n);
     assert!(r.max_speed <= 0.2, "max speed {}", r.max_speed);
     assert!(
         r.max_penetration <= 0.02,
@@ -187,6 +206,31 @@ fn falling_cubes_1000_settle_within_ten_seconds() {
         "a body sank: lowest centre {}",
         r.min_height
     );
+    let now = sim.state().sorted::<RigidBodyModel>();
+    let outside = farthest_outside_footprint(&initial, &now);
+    assert!(
+        outside <= 2.0,
+        "a cube ended {outside} m outside the footprint"
+    );
+    assert!(
+        (r.max_height - top).abs() <= 0.5,
+        "highest centre {}, expected {top} ± 0.5 m",
+        r.max_height
+    );
+}
+
+/// 1,000 falling cubes (10-high columns) settle within 10 simulated seconds and the columns
+/// stand (top centre 9.5 m).
+#[test]
+fn falling_cubes_1000_settle_within_ten_seconds() {
+    assert_falling_cubes_stand(1000, 9.5);
+}
+
+/// 8,000 falling cubes: the 20-high columns stand after 10 simulated seconds (Rapier's top
+/// centre: 19.4 m, benches/vs_rapier.rs), nothing flung away (~10 s in release).
+#[test]
+fn falling_cubes_8000_columns_stand_after_ten_seconds() {
+    assert_falling_cubes_stand(8000, 19.4);
 }
 
 fn unit_cube() -> Shape {
