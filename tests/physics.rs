@@ -385,3 +385,44 @@ fn energy_growth_of_a_mixed_pile_is_bounded_by_the_separation_allowance() {
         .sum();
     assert_energy_never_grows("dense-pile", scene, 300, allowance + 1e-3);
 }
+
+/// The impact-pass parameters are validated like every solver value: the error names the
+/// field and the value.
+#[test]
+fn bad_impact_parameters_are_rejected_naming_the_field() {
+    let build = |params: soda::physics::SolverParams| {
+        let mut b = SceneBuilder::new([-5.0, -1.0, -5.0], [5.0, 10.0, 5.0]).solver(params);
+        b.body(unit_cube(), Material::default(), [0.0, 1.0, 0.0], [0.0; 3]);
+        b.build()
+    };
+    let cases = [
+        (
+            soda::physics::SolverParams {
+                landing_speed: f32::NAN,
+                ..Default::default()
+            },
+            "solver.landing_speed",
+        ),
+        (
+            soda::physics::SolverParams {
+                landing_speed: -1.0,
+                ..Default::default()
+            },
+            "solver.landing_speed",
+        ),
+        (
+            soda::physics::SolverParams {
+                impact_iterations: 1000,
+                ..Default::default()
+            },
+            "solver.impact_iterations",
+        ),
+    ];
+    for (params, field) in cases {
+        let err = build(params)
+            .expect_err("bad solver value accepted")
+            .to_string();
+        assert!(err.contains(field), "error {err:?} does not name {field}");
+    }
+    assert!(build(Default::default()).is_ok());
+}

@@ -104,6 +104,13 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         ));
     }
     c.range(
+        "solver.landing_speed",
+        s.landing_speed,
+        0.0,
+        100.0,
+        "must be between 0 and 100 m/s",
+    )?;
+    c.range(
         "solver.relaxation",
         s.relaxation,
         0.01,
