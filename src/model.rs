@@ -70,6 +70,16 @@ pub trait CellModel: Send + Sync {
         events: &mut Vec<Event>,
     );
 
+    /// Whether computing the cell that homes `reader` may read `other`, the state of an
+    /// entity homed in a neighbouring cell at the same step. `false` is a promise: a cell's
+    /// output is unchanged when every neighbour entity that no entity of the cell may read is
+    /// removed from its neighbourhood (SPEC.md §K4, dirty propagation). `true` is always
+    /// sound (the default).
+    fn may_affect(&self, reader: &Self::State, other: &Self::State) -> bool {
+        let _ = (reader, other);
+        true
+    }
+
     /// Feeds every bit of the state that matters into the canonical hash.
     fn hash_state(state: &Self::State, hasher: &mut StateHash);
 

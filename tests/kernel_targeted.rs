@@ -119,10 +119,26 @@ fn world_mode_recomputes_the_whole_territory() {
 }
 
 #[test]
-fn early_cutoff_stops_propagation_when_recomputed_states_are_unchanged() {
-    // Cell 2's particle is out of reach of cell 3's: recomputing cell 3 at step 0 gives the
-    // same output, so nothing propagates to step 1.
+fn a_changed_particle_out_of_reach_of_every_neighbour_dirties_nothing() {
+    // Cell 2's particle is 1.2 from cell 3's, beyond the model's reach (0.5): no particle of
+    // cell 3 may read it (`CellModel::may_affect`), so the straggler is absorbed unrecomputed.
     let r = row(vec![particle(0, 2.2, 0.0), particle(1, 3.4, 0.0)]);
+    let (mut w1, _) = r.world1_ahead(RollbackMode::Cell, 4);
+    w1.set_recording(true);
+    w1.receive(r.ghost_of_cell_2());
+    let sent = settle(&mut w1);
+    assert_eq!(w1.take_record().recomputations(), vec![]);
+    assert!(sent.is_empty(), "nothing changed: {sent:?}");
+    let c = w1.counters();
+    assert_eq!((c.rollbacks_primary, c.stragglers_absorbed), (0, 1));
+}
+
+#[test]
+fn early_cutoff_stops_propagation_when_recomputed_states_are_unchanged() {
+    // Cell 2's particle is just within reach of cell 3's, which moves at twice the speed
+    // cap: the push (~2e-8) rounds away in its velocity and the cap gives the same state,
+    // so recomputing cell 3 at step 0 gives the same output and nothing propagates.
+    let r = row(vec![particle(0, 2.75, 0.0), particle(1, 3.2499998, 0.6)]);
     let (mut w1, _) = r.world1_ahead(RollbackMode::Cell, 4);
     let before: Vec<Vec<Particle>> = (1..=4)
         .map(|t| w1.cell_state(3, t).unwrap().to_vec())

@@ -3,6 +3,8 @@
 //! counter, plus the experiment's own columns) and `DIR/NAME.svg` (a chart), with a progress
 //! bar. `--quick` runs a small version in well under a minute (used by the tests).
 
+mod peak;
+
 use super::charts;
 use super::table::{csv_line, run_row};
 use anyhow::{bail, Context, Result};
@@ -23,6 +25,7 @@ Examples:
   soda experiment rp-efficiency --quick --out results
   soda experiment scalability --out results     results/scalability.csv and .svg
   soda experiment sync-share
+  soda experiment peak-resistance --out results  also peak-resistance-gaps.svg and -cost.csv/.svg
   soda experiment raw-performance";
 
 /// The experiments.
@@ -42,6 +45,10 @@ pub enum ExperimentName {
     /// against conservative, on a sparse and a dense scene (virtual executor, seeded
     /// schedules).
     RpEfficiency,
+    /// A computational peak (a block of cubes landing on one quadrant of the `peak` scene),
+    /// costed as collisions during it over collisions before, against the optimism window
+    /// (threaded executor, W = 1..64): wall time, gaps between committed frames, rollbacks.
+    PeakResistance,
 }
 
 impl ExperimentName {
@@ -51,6 +58,7 @@ impl ExperimentName {
             Self::RawPerformance => "raw-performance",
             Self::SyncShare => "sync-share",
             Self::RpEfficiency => "rp-efficiency",
+            Self::PeakResistance => "peak-resistance",
         }
     }
 }
@@ -88,6 +96,7 @@ pub fn experiment(args: &ExperimentArgs) -> Result<()> {
         ExperimentName::RawPerformance => raw_performance(args.quick, &svg)?,
         ExperimentName::SyncShare => sync_share(args.quick, &svg)?,
         ExperimentName::RpEfficiency => rp_efficiency(args.quick, &svg)?,
+        ExperimentName::PeakResistance => peak::peak_resistance(args.quick, &svg)?,
     };
     write_csv(&csv, &rows)?;
     println!("wrote {}", csv.display());

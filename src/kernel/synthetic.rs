@@ -128,6 +128,13 @@ impl CellModel for Particles {
         }
     }
 
+    /// The same distance test, in the same arithmetic, as `step_cell`'s repulsion.
+    fn may_affect(&self, reader: &Particle, other: &Particle) -> bool {
+        let d = [0, 1, 2].map(|a| reader.pos[a] - other.pos[a]);
+        let dist = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        dist < Self::RADIUS
+    }
+
     fn hash_state(s: &Particle, h: &mut StateHash) {
         for a in 0..3 {
             h.f32(s.pos[a]);

@@ -206,6 +206,41 @@ fn same_state<M: CellModel>(a: &M::State, b: &M::State) -> bool {
     ha.finish() == hb.finish()
 }
 
+/// The entities that differ between two id-sorted states of one cell: both versions of an
+/// entity whose bits changed, and every entity present on one side only.
+fn changed_entities<'a, M: CellModel>(
+    old: &'a [M::State],
+    new: &'a [M::State],
+) -> Vec<&'a M::State> {
+    let (mut i, mut j) = (0, 0);
+    let mut changed = Vec::new();
+    while i < old.len() || j < new.len() {
+        match (old.get(i), new.get(j)) {
+            (Some(a), Some(b)) if M::id(a) == M::id(b) => {
+                if !same_state::<M>(a, b) {
+                    changed.extend([a, b]);
+                }
+                i += 1;
+                j += 1;
+            }
+            (Some(a), Some(b)) if M::id(a) > M::id(b) => {
+                changed.push(b);
+                j += 1;
+            }
+            (Some(a), _) => {
+                changed.push(a);
+                i += 1;
+            }
+            (None, Some(b)) => {
+                changed.push(b);
+                j += 1;
+            }
+            (None, None) => unreachable!("the loop runs while one side has entities"),
+        }
+    }
+    changed
+}
+
 impl<M: CellModel> World<M> {
     /// World `id` of `part`, starting at step 0 from `initial` (binned over `grid`).
     pub fn new(
@@ -715,8 +750,9 @@ impl<M: CellModel> World<M> {
     }
 
     /// Rebuilds the state of own cell `d` at `t ≥ base + 1` from the outputs at `t − 1` of the
-    /// own cells around it and the migrations into it. Returns whether it changed.
-    fn rebuild_state(&mut self, d: u32, t: Step) -> bool {
+    /// own cells around it and the migrations into it. Returns the previous state if it
+    /// changed.
+    fn rebuild_state(&mut self, d: u32, t: Step) -> Option<Vec<M::State>> {
         let grid = &*self.grid;
         let part = &*self.part;
         let prev = &self.slots[(t - 1 - self.base) as usize];
@@ -747,38 +783,78 @@ impl<M: CellModel> World<M> {
         v.sort_by_key(|b| M::id(b));
         let ld = part.local(d) as usize;
         let i = (t - self.base) as usize;
-        let changed = !Self::same_states(&v, &self.slots[i].states[ld]);
-        self.slots[i].states[ld] = v;
-        changed
+        if Self::same_states(&v, &self.slots[i].states[ld]) {
+            return None;
+        }
+        Some(std::mem::replace(&mut self.slots[i].states[ld], v))
     }
 
-    /// Marks dirty at step `s < head` every own cell around `cell` whose computation at `s`
-    /// can produce something (occupied now, or produced something before). Returns whether
-    /// any was marked.
-    fn mark_dirty_around(&mut self, cell: u32, s: Step) -> bool {
+    /// The own cells around `cell` whose computation at `s` must be redone because the state
+    /// of `cell` at `s` changed from `old` to `new`: `cell` itself if it is own and can produce
+    /// something (occupied now, or produced something before); every other own neighbour
+    /// that can produce something — in cell mode, only if one of its entities may read a
+    /// changed entity (`CellModel::may_affect`, SPEC.md §K4) or it is empty but produced
+    /// something before.
+    fn cells_reading(&self, cell: u32, s: Step, old: &[M::State], new: &[M::State]) -> Vec<u32> {
         let i = self.si(s);
-        let mut marked = false;
+        let slot = &self.slots[i];
+        let filter = self.mode == RollbackMode::Cell;
+        let changed = if filter {
+            changed_entities::<M>(old, new)
+        } else {
+            Vec::new()
+        };
+        let mut reading = Vec::new();
         for n in self.grid.neighbours(self.grid.coord(cell as usize)) {
             let ni = self.grid.index(n) as u32;
             if !self.is_own(ni) {
                 continue;
             }
             let x = self.part.local(ni) as usize;
-            let slot = &self.slots[i];
-            if !slot.states[x].is_empty() || slot.outs[x].as_ref().is_some_and(|o| !o.is_empty()) {
-                self.dirty.entry(s).or_default().insert(x as u32);
-                marked = true;
+            let state = &slot.states[x];
+            let produced = slot.outs[x].as_ref().is_some_and(|o| !o.is_empty());
+            let reads = if !filter || ni == cell {
+                !state.is_empty() || produced
+            } else {
+                (state.is_empty() && produced)
+                    || state
+                        .iter()
+                        .any(|r| changed.iter().any(|c| self.model.may_affect(r, c)))
+            };
+            if reads {
+                reading.push(x as u32);
             }
         }
-        marked
+        reading
     }
 
-    /// The state of own cell `d` at `t ≤ head` changed: re-send its ghost, and if step `t` was
-    /// computed, dirty its neighbourhood. Returns whether something became dirty.
-    fn on_state_change(&mut self, d: u32, t: Step, out: &mut Vec<Message<M::State>>) -> bool {
+    /// Marks the own `cells` dirty at step `s < head`. Returns whether there were any.
+    fn mark_dirty(&mut self, s: Step, cells: Vec<u32>) -> bool {
+        if cells.is_empty() {
+            return false;
+        }
+        self.dirty.entry(s).or_default().extend(cells);
+        true
+    }
+
+    /// The state of own cell `d` at `t ≤ head` changed from `old`: re-send its ghost, and if
+    /// step `t` was computed, dirty the cells reading it. Returns whether something became
+    /// dirty.
+    fn on_state_change(
+        &mut self,
+        d: u32,
+        t: Step,
+        old: Vec<M::State>,
+        out: &mut Vec<Message<M::State>>,
+    ) -> bool {
         let x = self.part.local(d) as usize;
         self.send_ghost(x, t, out);
-        t < self.head && self.mark_dirty_around(d, t)
+        if t >= self.head {
+            return false;
+        }
+        let i = self.si(t);
+        let cells = self.cells_reading(d, t, &old, &self.slots[i].states[x]);
+        self.mark_dirty(t, cells)
     }
 
     fn drain_inbox(&mut self, out: &mut Vec<Message<M::State>>) {
@@ -861,14 +937,17 @@ impl<M: CellModel> World<M> {
             MessageKind::Input => unreachable!("inputs are applied by apply_input"),
             MessageKind::Ghost => {
                 let slot = &mut self.slots[i];
-                if new.is_empty() {
-                    slot.ghosts.remove(&src);
+                let old = if new.is_empty() {
+                    slot.ghosts.remove(&src)
                 } else {
                     slot.ghosts
-                        .insert(src, new.into_iter().map(|p| p.1).collect());
+                        .insert(src, new.into_iter().map(|p| p.1).collect())
                 }
+                .unwrap_or_default();
                 if step < self.head {
-                    if self.mark_dirty_around(src, step) {
+                    let current = self.slots[i].ghosts.get(&src).map_or(&[][..], |v| &v[..]);
+                    let cells = self.cells_reading(src, step, &old, current);
+                    if self.mark_dirty(step, cells) {
                         return Some(step);
                     }
                     self.counters.stragglers_absorbed += 1;
@@ -900,8 +979,8 @@ impl<M: CellModel> World<M> {
                 let mut dirtied = false;
                 if step <= self.head {
                     for &d in &dsts {
-                        if self.rebuild_state(d, step) {
-                            dirtied |= self.on_state_change(d, step, out);
+                        if let Some(old) = self.rebuild_state(d, step) {
+                            dirtied |= self.on_state_change(d, step, old, out);
                         }
                     }
                     if step < self.head && !dirtied {
@@ -942,8 +1021,8 @@ impl<M: CellModel> World<M> {
         let mut dirtied = false;
         if step <= self.head {
             for d in cells {
-                if self.rebuild_state(d, step) {
-                    dirtied |= self.on_state_change(d, step, out);
+                if let Some(old) = self.rebuild_state(d, step) {
+                    dirtied |= self.on_state_change(d, step, old, out);
                 }
             }
         }
@@ -988,8 +1067,8 @@ impl<M: CellModel> World<M> {
             self.slots[i].outs[x] = Some(new);
         }
         for d in changed_dst {
-            if self.rebuild_state(d, s + 1) {
-                self.on_state_change(d, s + 1, out);
+            if let Some(old) = self.rebuild_state(d, s + 1) {
+                self.on_state_change(d, s + 1, old, out);
             }
         }
         for (x, w) in changed_mig {

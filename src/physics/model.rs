@@ -149,8 +149,8 @@ impl RigidBodyModel {
         self.sleeping() && b.rest_steps >= self.params.sleep_steps
     }
 
-    /// Whether the awake body `k` can reach the sleeping body `i` during this step (its
-    /// bounding sphere within the pair's speculative distance, SPEC.md §5.2).
+    /// Whether bodies `i` and `k` can interact during this step (bounding spheres within the
+    /// pair's speculative distance, SPEC.md §5.2): the test for contacts and for waking.
     fn can_reach(&self, i: &Body, k: &Body) -> bool {
         let (a, b) = if i.id < k.id { (i, k) } else { (k, i) };
         let cap = self.prediction();
@@ -323,6 +323,12 @@ impl CellModel for RigidBodyModel {
             };
             out.push(next);
         }
+    }
+
+    /// A body's step reads a neighbour only through `can_reach` (contacts and waking); an
+    /// all-asleep neighbourhood freezes exactly the bodies no awake body reaches.
+    fn may_affect(&self, reader: &Body, other: &Body) -> bool {
+        self.can_reach(reader, other)
     }
 
     fn hash_state(b: &Body, h: &mut StateHash) {

@@ -1,6 +1,6 @@
 //! The built-in scenes, seeded and sized by parameters.
 
-use super::{Scene, SceneBuilder, SceneError};
+use super::{BodySpec, Scene, SceneBuilder, SceneError};
 use crate::physics::{Material, Shape};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -22,6 +22,7 @@ pub const BUILTINS: &[Builtin] = &[
     Builtin { name: "dense-pile", default_objects: 500, about: "cubes and balls dropped into a narrow walled bin, forming a dense pile" },
     Builtin { name: "skewed", default_objects: 300, about: "a lattice of falling cubes in one corner of a large domain (load imbalance)" },
     Builtin { name: "chain", default_objects: 60, about: "a row of touching balls spanning the domain, pushed at one end (a chain across every territory)" },
+    Builtin { name: "peak", default_objects: 1000, about: "a floor of balls spinning in place (a steady load) and a block of twice as many cubes landing at 1.5 s on one quadrant (a computational peak)" },
 ];
 
 /// Builds the built-in scene `name` with `objects` bodies (or its default) and `seed`.
@@ -45,6 +46,7 @@ pub fn builtin(name: &str, objects: Option<usize>, seed: u64) -> Result<Scene, S
         "skewed" => falling_cubes(n, &mut rng, 0.0, [1.0, 1.0]),
         "sparse-gas" => sparse_gas(n, &mut rng),
         "dense-pile" => dense_pile(n, &mut rng),
+        "peak" => peak(n, &mut rng),
         _ => chain(n),
     };
     scene.name(name).seed(seed).build()
@@ -179,5 +181,74 @@ fn chain(n: usize) -> SceneBuilder {
         );
     }
     b.velocity(0, [5.0, 0.0, 0.0]);
+    b
+}
+
+/// Height of the peak scene's lowest burst layer: it lands after sqrt(2·11 m / g) ≈ 1.50 s,
+/// step 90 at 60 steps per second.
+pub const PEAK_DROP_HEIGHT: f32 = 11.5;
+
+/// The peak scene: `n − ⌈2n/3⌉` balls (radius 0.4 m) resting on a square lattice (1.5 m
+/// apart) and spinning about the vertical at 2 rad/s — their contact point does not slip,
+/// so they never slow down or fall asleep: a steady load on every territory — and, above the
+/// centre of the (+x, +z) quadrant, a block of `⌈2n/3⌉` unit cubes (the falling-cubes
+/// lattice, jittered by `rng`) whose lowest layer starts at [`PEAK_DROP_HEIGHT`]. The floor
+/// is left clear 2 m around the block's footprint, so the landing stays in that quadrant;
+/// 10 m of free domain surround the floor.
+/// The lattice is the smallest square whose sites outside the clearing hold the balls.
+fn peak(n: usize, rng: &mut ChaCha8Rng) -> SceneBuilder {
+    const SPACING: f32 = 1.5;
+    const RADIUS: f32 = 0.4;
+    let cubes = (2 * n).div_ceil(3);
+    let balls = n - cubes;
+    let side = (cubes as f64).cbrt().ceil() as usize;
+    let layers = cubes.div_ceil(side * side);
+    let clearing = side as f32 * 1.2 + 4.0;
+    let inside = |c: f32, x: f32| (x - c).abs() < clearing / 2.0;
+    // Lattice sites of an s × s floor outside the clearing of the (+x, +z) quadrant's centre.
+    let sites = |s: usize| -> Vec<[f32; 2]> {
+        let centre = s as f32 * SPACING / 4.0;
+        let coord = |i: usize| (i as f32 - (s as f32 - 1.0) / 2.0) * SPACING;
+        (0..s * s)
+            .map(|k| [coord(k % s), coord(k / s)])
+            .filter(|p| !(inside(centre, p[0]) && inside(centre, p[1])))
+            .collect()
+    };
+    let mut s = ((2.0 * clearing / SPACING).ceil() as usize).max(2);
+    while sites(s).len() < balls {
+        s += 1;
+    }
+    let half = s as f32 * SPACING / 2.0 + 10.0;
+    let centre = s as f32 * SPACING / 4.0;
+    let top = PEAK_DROP_HEIGHT + (layers as f32 - 1.0) * 1.2 + 0.5;
+    let mut b = SceneBuilder::new([-half, -1.0, -half], [half, top + 5.0, half])
+        .environment_material(0.5, 0.0);
+    let material = Material::default();
+    for (k, p) in sites(s).into_iter().take(balls).enumerate() {
+        b = b.body_spec(BodySpec {
+            id: k as u64,
+            shape: Shape::Ball { radius: RADIUS },
+            material,
+            position: [p[0], RADIUS, p[1]],
+            rotation: [0.0; 3],
+            velocity: [0.0; 3],
+            angular_velocity: [0.0, 2.0, 0.0],
+        });
+    }
+    let mid = (side as f32 - 1.0) / 2.0;
+    for k in 0..cubes {
+        let layer = k / (side * side);
+        let i = (k % (side * side)) % side;
+        let j = (k % (side * side)) / side;
+        let mut jit = || rng.random_range(-0.05f32..=0.05);
+        let pos = [
+            centre + (i as f32 - mid) * 1.2 + jit(),
+            PEAK_DROP_HEIGHT + layer as f32 * 1.2 + jit(),
+            centre + (j as f32 - mid) * 1.2 + jit(),
+        ];
+        let mut rot = || rng.random_range(-0.04f32..=0.04);
+        let r = [rot(), rot(), rot()];
+        b.body(unit_cube(), material, pos, r);
+    }
     b
 }
