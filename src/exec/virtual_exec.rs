@@ -483,11 +483,10 @@ impl<M: CellModel> VirtualRun<M> {
             w.set_end(end);
         }
         self.update_gvt(wanted, &mut sink);
-        self.balance_if_due();
         while self.committed < target {
+            self.balance_if_due();
             self.decide();
             self.update_gvt(wanted, &mut sink);
-            self.balance_if_due();
         }
     }
 

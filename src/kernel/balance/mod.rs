@@ -54,7 +54,8 @@ pub struct RoundRecord {
     pub cells_moved: u64,
     /// Worlds that fought famine.
     pub famines: u64,
-    /// The owner of every cell after the round.
+    /// The owner of every cell after the round (in memory only: not serialised).
+    #[serde(skip)]
     pub owners: Vec<WorldId>,
 }
 
