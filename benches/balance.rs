@@ -125,6 +125,29 @@ fn main() {
         "step,imbalance_off,imbalance_on,cells_moved_on,famines_on"
     )
     .expect("write");
+    // The time T threads need at best for each period's measured per-world CPU seconds:
+    // the busiest world, or the total shared by T threads, whichever is longer.
+    let modelled = |rounds: &[soda::kernel::RoundRecord]| -> f64 {
+        let mut last = 0;
+        let mut total = 0.0;
+        for r in rounds {
+            let span = (r.step - last) as f64;
+            let max = r.loads.iter().copied().fold(0.0, f64::max);
+            let sum: f64 = r.loads.iter().sum();
+            total += span * max.max(sum / threads as f64);
+            last = r.step;
+        }
+        total
+    };
+    let (m_off, m_on) = (modelled(&watched.balance), modelled(&balanced.balance));
+    println!(
+        "modelled {threads}-thread time of steps 1..={} from per-world CPU seconds: off {m_off:.3} s, \
+         on {m_on:.3} s, speed-up {:.2}x (wall: monitor-off {:.3} s, on {:.3} s)",
+        watched.balance.last().map_or(0, |r| r.step),
+        m_off / m_on.max(1e-12),
+        watched.wall_seconds,
+        balanced.wall_seconds
+    );
     println!("step  imbalance off  imbalance on  cells moved  famines");
     for (a, b) in watched.balance.iter().zip(&balanced.balance) {
         writeln!(

@@ -141,12 +141,30 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     started: Instant,
 }
 
-/// A world, the last step it has handed to the frame assembly, and its busy seconds (in
-/// actions) since the last balancing round.
+/// A world, the last step it has handed to the frame assembly, and the CPU seconds its
+/// actions took since the last balancing round (its measured load).
 struct Slot<M: CellModel> {
     world: World<M>,
     contributed: Step,
     busy: f64,
+}
+
+/// CPU seconds the calling thread has run (not counting time other processes took the
+/// core), for load measurements that hold on a shared machine; wall-clock time where the
+/// thread clock is unavailable.
+fn thread_cpu_seconds() -> f64 {
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `t` is a valid, writable timespec and the clock id is a constant.
+    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) } == 0;
+    if ok {
+        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+    } else {
+        thread_local!(static START: Instant = Instant::now());
+        START.with(|s| s.elapsed().as_secs_f64())
+    }
 }
 
 /// Committed steps being assembled from the worlds' contributions.
@@ -265,9 +283,10 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             }
             let kind = world.next_action();
             let a0 = Instant::now();
+            let c0 = thread_cpu_seconds();
             let acted = catch_unwind(AssertUnwindSafe(|| world.act(gvt)));
             let spent = a0.elapsed().as_secs_f64();
-            *busy += spent;
+            *busy += thread_cpu_seconds() - c0;
             *match kind {
                 ActionKind::Receive => &mut times.receive_seconds,
                 ActionKind::Repair => &mut times.rollback_seconds,

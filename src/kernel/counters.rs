@@ -145,8 +145,8 @@ pub struct BalanceCounters {
     /// Worlds that fought famine (handed their territory over and took part of the most
     /// loaded world's), summed over rounds.
     pub famines: u64,
-    /// Max over mean of the worlds' load summed over the run (busy seconds in threaded
-    /// runs, cell computations in virtual runs); 1 is perfect balance.
+    /// Max over mean of the worlds' load summed over the run (CPU seconds of their actions
+    /// in threaded runs, cell computations in virtual runs); 1 is perfect balance.
     pub imbalance: f64,
 }
 
