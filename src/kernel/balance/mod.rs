@@ -54,6 +54,8 @@ pub struct RoundRecord {
     pub cells_moved: u64,
     /// Worlds that fought famine.
     pub famines: u64,
+    /// Which worlds fought famine, in the order they did.
+    pub famished: Vec<WorldId>,
     /// The owner of every cell after the round (in memory only: not serialised).
     #[serde(skip)]
     pub owners: Vec<WorldId>,
@@ -174,8 +176,12 @@ impl Balancer {
             plan.cede();
             plan.fight_famine();
         }
-        let famines = plan.famines;
-        let Plan { owner, est, .. } = plan;
+        let Plan {
+            owner,
+            est,
+            famished,
+            ..
+        } = plan;
         let mut moved = 0;
         for (c, (&new, &old)) in owner.iter().zip(part.owners()).enumerate() {
             if new != old {
@@ -189,7 +195,8 @@ impl Balancer {
             imbalance: imbalance(&loads),
             loads,
             cells_moved: moved,
-            famines,
+            famines: famished.len() as u64,
+            famished,
             owners: owner.clone(),
         });
         self.round += 1;
@@ -207,7 +214,7 @@ struct Plan<'a> {
     tie: Vec<u32>,
     world_tie: Vec<u32>,
     mean: f64,
-    famines: u64,
+    famished: Vec<WorldId>,
 }
 
 impl<'a> Plan<'a> {
@@ -263,7 +270,7 @@ impl<'a> Plan<'a> {
             tie,
             world_tie,
             mean,
-            famines: 0,
+            famished: Vec::new(),
         }
     }
 
@@ -419,7 +426,7 @@ impl<'a> Plan<'a> {
             let target = self.mean.min(self.est[m as usize] - self.mean);
             if self.hand_over(w) {
                 self.take_part(w, m, target);
-                self.famines += 1;
+                self.famished.push(w);
             }
         }
     }
