@@ -501,3 +501,79 @@ impl<'a> Plan<'a> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Vec3;
+
+    /// 8×1×1 cells, two worlds of four cells each, one body per cell of world 0.
+    fn row() -> (Grid, Partition, Vec<u32>) {
+        let g = Grid::covering(Vec3::zeros(), Vec3::new(8.0, 1.0, 1.0), 1.0);
+        let p = Partition::blocks(&g, 2);
+        let bodies = (0..8).map(|c| (c < 4) as u32).collect();
+        (g, p, bodies)
+    }
+
+    #[test]
+    fn levels_follow_the_thresholds_against_the_mean() {
+        let b = Balancer::new(&BalanceConfig::on(), 1);
+        assert_eq!(b.level(0.5, 1.0), LoadLevel::Underloaded);
+        assert_eq!(b.level(1.0, 1.0), LoadLevel::Normal);
+        assert_eq!(b.level(1.3, 1.0), LoadLevel::High);
+        assert_eq!(b.level(2.0, 1.0), LoadLevel::Overloaded);
+    }
+
+    #[test]
+    fn an_overloaded_world_gives_its_border_cells_to_its_neighbour_without_overshooting() {
+        let (g, p, bodies) = row();
+        let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
+        let new = b
+            .round(&g, &p, &[4.0, 0.0], &bodies, 10)
+            .expect("cells move");
+        // The giver's cells next to the border go first, and the giver keeps at least as
+        // much load as the recipient gets.
+        assert_eq!(new.owners(), &[0, 0, 1, 1, 1, 1, 1, 1]);
+        let r = &b.history()[0];
+        assert_eq!((r.step, r.cells_moved, r.famines), (10, 2, 0));
+        assert_eq!(r.imbalance, 2.0);
+    }
+
+    #[test]
+    fn balanced_loads_move_nothing_and_cooldown_holds_moved_cells() {
+        let (g, p, bodies) = row();
+        let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
+        assert!(b.round(&g, &p, &[1.0, 1.1], &bodies, 5).is_none());
+        let config = BalanceConfig {
+            cooldown: 5,
+            smoothing: 1.0,
+            ..BalanceConfig::on()
+        };
+        let mut b = Balancer::new(&config, g.cell_count());
+        let p1 = b
+            .round(&g, &p, &[4.0, 0.0], &bodies, 5)
+            .expect("cells move");
+        // World 1 now measures all the load, but the moved cells are cooling down.
+        let p2 = b.round(&g, &p1, &[0.0, 4.0], &bodies, 10);
+        let moved_back = p2.is_some_and(|p2| p2.owner(3) == 0 || p2.owner(2) == 0);
+        assert!(!moved_back, "a cell bounced back during its cooldown");
+    }
+
+    #[test]
+    fn a_starving_world_far_from_the_load_hands_over_and_takes_part_of_it() {
+        let g = Grid::covering(Vec3::zeros(), Vec3::new(9.0, 1.0, 1.0), 1.0);
+        let p = Partition::blocks(&g, 3);
+        let bodies: Vec<u32> = (0..9).map(|c| (c < 3) as u32 * 2).collect();
+        let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
+        let new = b
+            .round(&g, &p, &[3.0, 0.0, 0.0], &bodies, 20)
+            .expect("moves");
+        let r = &b.history()[0];
+        assert!(r.famished.contains(&2), "world 2 starves: {r:?}");
+        assert!(
+            new.cells_of(2).iter().all(|&c| c < 3),
+            "world 2 now owns part of world 0's old, loaded territory: {:?}",
+            new.owners()
+        );
+    }
+}
