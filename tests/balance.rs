@@ -214,3 +214,90 @@ fn run_initial_owners(g: &Grid, config: &KernelConfig) -> Vec<u32> {
         .owners()
         .to_vec()
 }
+
+fn soda(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_soda"))
+        .args(args)
+        .output()
+        .expect("soda runs")
+}
+
+fn hash_line(out: &std::process::Output) -> String {
+    let text = String::from_utf8_lossy(&out.stdout);
+    text.lines()
+        .find(|l| l.starts_with("hash"))
+        .unwrap_or_else(|| panic!("no hash line in {text}"))
+        .to_string()
+}
+
+#[test]
+fn cli_balance_on_keeps_the_hash_and_draws_the_territories() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let maps = dir.path().join("maps");
+    let base = [
+        "run",
+        "--scene",
+        "skewed",
+        "--objects",
+        "64",
+        "--steps",
+        "30",
+    ];
+    let reference = soda(&base);
+    assert!(reference.status.success());
+    let mut args = base.to_vec();
+    args.extend([
+        "--executor",
+        "virtual",
+        "--worlds",
+        "6",
+        "--balance",
+        "on",
+        "--balance-period",
+        "5",
+        "--territories",
+        maps.to_str().expect("utf-8 path"),
+    ]);
+    let balanced = soda(&args);
+    assert!(
+        balanced.status.success(),
+        "{}",
+        String::from_utf8_lossy(&balanced.stderr)
+    );
+    assert_eq!(hash_line(&balanced), hash_line(&reference));
+    let text = String::from_utf8_lossy(&balanced.stdout);
+    assert!(text.contains("balancing        5 rounds"), "{text}");
+    for f in [
+        "territory-000000.svg",
+        "territory-000005.svg",
+        "imbalance.svg",
+    ] {
+        let svg = std::fs::read_to_string(maps.join(f)).expect(f);
+        assert!(svg.contains("<svg"), "{f} is not an SVG");
+    }
+}
+
+#[test]
+fn cli_balance_options_are_checked_with_the_fix_named() {
+    let out = soda(&["run", "--executor", "virtual", "--balance-period", "5"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("add `--balance on`"));
+    let out = soda(&[
+        "run",
+        "--executor",
+        "virtual",
+        "--balance",
+        "on",
+        "--balance-thresholds",
+        "1.5,1.2,0.8",
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("underloaded <= 1 <= high <= overloaded"),
+        "{err}"
+    );
+    let out = soda(&["run", "--balance", "on"]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--executor virtual"));
+}
