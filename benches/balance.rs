@@ -140,6 +140,21 @@ fn main() {
         total
     };
     let (m_off, m_on) = (modelled(&watched.balance), modelled(&balanced.balance));
+    let cpu = |rounds: &[soda::kernel::RoundRecord]| -> f64 {
+        let mut last = 0;
+        let mut total = 0.0;
+        for r in rounds {
+            total += (r.step - last) as f64 * r.loads.iter().sum::<f64>();
+            last = r.step;
+        }
+        total
+    };
+    println!(
+        "CPU seconds of the worlds' actions, steps 1..={}: off {:.3} s, on {:.3} s",
+        watched.balance.last().map_or(0, |r| r.step),
+        cpu(&watched.balance),
+        cpu(&balanced.balance)
+    );
     println!(
         "modelled {threads}-thread time of steps 1..={} from per-world CPU seconds: off {m_off:.3} s, \
          on {m_on:.3} s, speed-up {:.2}x (wall: monitor-off {:.3} s, on {:.3} s)",
