@@ -99,9 +99,9 @@ pub(crate) fn gather_states<'a, M: CellModel + 'a>(
     states
 }
 
-/// A balancing round at committed step `step` (SPEC.md §Balancing): hands `loads` (per world,
-/// per committed step since the last round) and the body count of every cell to the
-/// balancer; if cells move, every world takes its new territory at `step` with its final
+/// A balancing round at committed step `step` (SPEC.md §K13): hands `loads` (per world, per
+/// committed step since the last round), `leads` (each world's mean LVT − GVT meanwhile) and
+/// the body count of every cell to the balancer; if cells move, every world takes its new territory at `step` with its final
 /// states ([`World::reterritory`]) and the new partition is returned. The caller must
 /// discard every message in transit and let the worlds [`World::start`] again.
 pub(crate) fn balance_round<'a, M: CellModel + 'a>(
@@ -110,6 +110,7 @@ pub(crate) fn balance_round<'a, M: CellModel + 'a>(
     partition: &Partition,
     worlds: impl IntoIterator<Item = &'a mut World<M>>,
     loads: &[f64],
+    leads: &[f64],
     step: Step,
 ) -> Option<Arc<Partition>> {
     let mut worlds: Vec<&mut World<M>> = worlds.into_iter().collect();
@@ -117,7 +118,7 @@ pub(crate) fn balance_round<'a, M: CellModel + 'a>(
     let bodies: Vec<u32> = (0..grid.cell_count())
         .map(|c| states.cell_at(c).len() as u32)
         .collect();
-    let new = Arc::new(balancer.round(grid, partition, loads, &bodies, step)?);
+    let new = Arc::new(balancer.round(grid, partition, loads, leads, &bodies, step)?);
     for w in worlds.iter_mut() {
         w.reterritory(new.clone(), &states, step);
     }

@@ -147,6 +147,8 @@ struct Slot<M: CellModel> {
     world: World<M>,
     contributed: Step,
     busy: f64,
+    /// The summed LVT − GVT after its actions since the last round, and their number.
+    lead: (f64, u64),
 }
 
 /// CPU seconds the calling thread has run (not counting time other processes took the
@@ -268,7 +270,9 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
         let gvt = self.gvt.load();
         self.contribute(&mut slot, gvt);
-        let Slot { world, busy, .. } = &mut *slot;
+        let Slot {
+            world, busy, lead, ..
+        } = &mut *slot;
         if self.postpone(w, world) {
             self.published[w].store(world.bound());
             drop(slot);
@@ -287,6 +291,8 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             let acted = catch_unwind(AssertUnwindSafe(|| world.act(gvt)));
             let spent = a0.elapsed().as_secs_f64();
             *busy += thread_cpu_seconds() - c0;
+            lead.0 += world.lvt().saturating_sub(gvt) as f64;
+            lead.1 += 1;
             *match kind {
                 ActionKind::Receive => &mut times.receive_seconds,
                 ActionKind::Repair => &mut times.rollback_seconds,
@@ -631,6 +637,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
                     world,
                     contributed: 0,
                     busy: 0.0,
+                    lead: (0.0, 0),
                 })
             })
             .collect(),
@@ -690,9 +697,14 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
                 _ => s.busy / span,
             })
             .collect();
+        let leads: Vec<f64> = locked
+            .iter()
+            .map(|s| s.lead.0 / s.lead.1.max(1) as f64)
+            .collect();
         for (w, s) in locked.iter_mut().enumerate() {
             busy_total[w] += s.busy;
             s.busy = 0.0;
+            s.lead = (0.0, 0);
             computed_at_round[w] = s.world.counters().cells_computed;
         }
         let moved = super::balance_round(
@@ -701,6 +713,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
             &partition,
             locked.iter_mut().map(|s| &mut s.world),
             &loads,
+            &leads,
             committed,
         );
         last_round = committed;

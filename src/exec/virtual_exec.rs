@@ -168,6 +168,9 @@ pub struct VirtualRun<M: CellModel> {
     next_round: Step,
     last_round: Step,
     computed_at_round: Vec<u64>,
+    /// Per world, the summed LVT − GVT after its actions since the last round, and their
+    /// number.
+    leads: Vec<(f64, u64)>,
     /// One copy of every input posted (re-posted to the worlds after a balancing round).
     inputs_posted: Vec<Message<M::State>>,
 }
@@ -216,6 +219,7 @@ impl<M: CellModel> VirtualRun<M> {
             next_round: Step::MAX,
             last_round: 0,
             computed_at_round,
+            leads: vec![(0.0, 0); worlds.len()],
             inputs_posted: Vec::new(),
         };
         run.next_round = run.balancer.next_round_after(0);
@@ -344,12 +348,19 @@ impl<M: CellModel> VirtualRun<M> {
             .zip(&self.computed_at_round)
             .map(|(now, then)| (now - then) as f64 / steps)
             .collect();
+        let leads: Vec<f64> = self
+            .leads
+            .iter()
+            .map(|&(sum, n)| sum / n.max(1) as f64)
+            .collect();
+        self.leads.iter_mut().for_each(|l| *l = (0.0, 0));
         let moved = super::balance_round(
             &mut self.balancer,
             &self.grid,
             &self.partition,
             self.worlds.iter_mut(),
             &loads,
+            &leads,
             step,
         );
         if let Some(p) = moved {
@@ -516,6 +527,9 @@ impl<M: CellModel> VirtualRun<M> {
                 self.worlds[acts[i]].trace_time(now);
             }
             let msgs = self.worlds[acts[i]].act(gvt);
+            let lead = &mut self.leads[acts[i]];
+            lead.0 += self.worlds[acts[i]].lvt().saturating_sub(gvt) as f64;
+            lead.1 += 1;
             self.post(msgs);
         } else {
             let m = self.pool.remove(i - acts.len());

@@ -50,6 +50,13 @@ pub struct RoundRecord {
     pub loads: Vec<f64>,
     /// Max over mean of `loads` (1 when nothing was measured).
     pub imbalance: f64,
+    /// Each world's mean advance over GVT (LVT − GVT after its actions) during the period:
+    /// the world holding GVT back has the smallest. Observed, not used in decisions.
+    pub leads: Vec<f64>,
+    /// Each world's bodies at the round's step, before cells moved.
+    pub bodies: Vec<u64>,
+    /// Each world's level from its smoothed load, before cells moved.
+    pub levels: Vec<LoadLevel>,
     /// Cells that changed owner.
     pub cells_moved: u64,
     /// Worlds that fought famine.
@@ -144,13 +151,15 @@ impl Balancer {
     }
 
     /// One round at committed step `step`: `measured` is each world's load per committed
-    /// step since the last round (ignored for [`LoadSource::Seeded`]), `bodies` the body
-    /// count of every cell at `step`. Returns the new partition if a cell moved.
+    /// step since the last round (ignored for [`LoadSource::Seeded`]), `leads` each world's
+    /// mean advance over GVT meanwhile (recorded only), `bodies` the body count of every
+    /// cell at `step`. Returns the new partition if a cell moved.
     pub fn round(
         &mut self,
         grid: &Grid,
         part: &Partition,
         measured: &[f64],
+        leads: &[f64],
         bodies: &[u32],
         step: Step,
     ) -> Option<Partition> {
@@ -171,6 +180,12 @@ impl Balancer {
                 .collect(),
             None => loads.clone(),
         };
+        let mean = est.iter().sum::<f64>() / n.max(1) as f64;
+        let levels = est.iter().map(|&l| self.level(l, mean)).collect();
+        let mut world_bodies = vec![0u64; n];
+        for (c, &b) in bodies.iter().enumerate() {
+            world_bodies[part.owner(c as u32) as usize] += b as u64;
+        }
         let mut plan = Plan::new(self, grid, part, est, bodies);
         if plan.mean > 0.0 {
             plan.cede();
@@ -194,6 +209,9 @@ impl Balancer {
             step,
             imbalance: imbalance(&loads),
             loads,
+            leads: leads.to_vec(),
+            bodies: world_bodies,
+            levels,
             cells_moved: moved,
             famines: famished.len() as u64,
             famished,
@@ -529,13 +547,18 @@ mod tests {
         let (g, p, bodies) = row();
         let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
         let new = b
-            .round(&g, &p, &[4.0, 0.0], &bodies, 10)
+            .round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 10)
             .expect("cells move");
         // The giver's cells next to the border go first, and the giver keeps at least as
         // much load as the recipient gets.
         assert_eq!(new.owners(), &[0, 0, 1, 1, 1, 1, 1, 1]);
         let r = &b.history()[0];
         assert_eq!((r.step, r.cells_moved, r.famines), (10, 2, 0));
+        assert_eq!(r.bodies, vec![4, 0]);
+        assert_eq!(
+            r.levels,
+            vec![LoadLevel::Overloaded, LoadLevel::Underloaded]
+        );
         assert_eq!(r.imbalance, 2.0);
     }
 
@@ -543,7 +566,9 @@ mod tests {
     fn balanced_loads_move_nothing_and_cooldown_holds_moved_cells() {
         let (g, p, bodies) = row();
         let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
-        assert!(b.round(&g, &p, &[1.0, 1.1], &bodies, 5).is_none());
+        assert!(b
+            .round(&g, &p, &[1.0, 1.1], &[0.0; 2], &bodies, 5)
+            .is_none());
         let config = BalanceConfig {
             cooldown: 5,
             smoothing: 1.0,
@@ -551,10 +576,10 @@ mod tests {
         };
         let mut b = Balancer::new(&config, g.cell_count());
         let p1 = b
-            .round(&g, &p, &[4.0, 0.0], &bodies, 5)
+            .round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 5)
             .expect("cells move");
         // World 1 now measures all the load, but the moved cells are cooling down.
-        let p2 = b.round(&g, &p1, &[0.0, 4.0], &bodies, 10);
+        let p2 = b.round(&g, &p1, &[0.0, 4.0], &[0.0; 2], &bodies, 10);
         let moved_back = p2.is_some_and(|p2| p2.owner(3) == 0 || p2.owner(2) == 0);
         assert!(!moved_back, "a cell bounced back during its cooldown");
     }
@@ -566,7 +591,7 @@ mod tests {
         let bodies: Vec<u32> = (0..9).map(|c| (c < 3) as u32 * 2).collect();
         let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
         let new = b
-            .round(&g, &p, &[3.0, 0.0, 0.0], &bodies, 20)
+            .round(&g, &p, &[3.0, 0.0, 0.0], &[0.0; 3], &bodies, 20)
             .expect("moves");
         let r = &b.history()[0];
         assert!(r.famished.contains(&2), "world 2 starves: {r:?}");
