@@ -1,4 +1,4 @@
-//! Load balancing by cell cession (SPEC.md §Balancing): whatever cells move, and whenever,
+//! Load balancing by cell cession (SPEC.md §K13): whatever cells move, and whenever,
 //! every committed frame equals the reference's; decisions replay from the seed and the
 //! schedule; territories never split; a famished world recovers.
 

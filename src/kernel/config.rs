@@ -224,7 +224,7 @@ impl KernelConfig {
     }
 }
 
-/// Where a balancing round reads each world's load (SPEC.md §Balancing). Whatever the
+/// Where a balancing round reads each world's load (SPEC.md §K13). Whatever the
 /// source, balancing only moves cells at a step every world has committed, so the committed
 /// bits never depend on it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -242,7 +242,7 @@ pub enum LoadSource {
     Seeded(u64),
 }
 
-/// Dynamic load balancing by cell cession (thesis §3.3; SPEC.md §Balancing).
+/// Dynamic load balancing by cell cession (thesis §3.3; SPEC.md §K13).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct BalanceConfig {

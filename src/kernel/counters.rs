@@ -135,7 +135,7 @@ pub struct Counters {
     pub balance: BalanceCounters,
 }
 
-/// What load balancing did over a run (SPEC.md §Balancing).
+/// What load balancing did over a run (SPEC.md §K13).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct BalanceCounters {
     /// Balancing rounds held (one per period, at a committed step).

@@ -275,7 +275,7 @@ impl<M: CellModel> World<M> {
         }
     }
 
-    /// Load balancing's handover (SPEC.md §Balancing): the world takes the territory `part`
+    /// Load balancing's handover (SPEC.md §K13): the world takes the territory `part`
     /// gives it at step `step`, which every world has committed (GVT = `step` + 1, so every
     /// state at `step` is final and nothing later was committed). Its logs restart at `step`
     /// from `states`, the whole domain's final states there, exactly as a world started at
