@@ -193,6 +193,11 @@ pub struct KernelReport {
     pub counters: Counters,
     /// Busy, GVT and idle time of the threads (threaded executor only).
     pub thread_times: Option<ThreadTimes>,
+    /// Load balancing configuration.
+    pub balance: crate::kernel::BalanceConfig,
+    /// The balancing rounds: step, loads, imbalance, cells moved, famines (owner maps are
+    /// kept in memory for charts, not written to JSON).
+    pub balance_rounds: Vec<crate::kernel::RoundRecord>,
 }
 
 /// Runs `scene` for `steps` steps on the executor `options` names, handing every committed
@@ -275,6 +280,7 @@ pub fn run_scene(
                     .then(|| run.schedule_string()),
                 counters,
                 None,
+                run.balance_history().to_vec(),
             ))
         }
         ExecutorKind::Threaded => {
@@ -297,6 +303,7 @@ pub fn run_scene(
                 None,
                 report.counters,
                 Some(report.times),
+                report.balance,
             ))
         }
     };
@@ -340,6 +347,7 @@ fn kernel_report(
     schedule: Option<String>,
     counters: Counters,
     thread_times: Option<ThreadTimes>,
+    balance_rounds: Vec<crate::kernel::RoundRecord>,
 ) -> KernelReport {
     KernelReport {
         worlds: counters.worlds.len(),
@@ -351,6 +359,8 @@ fn kernel_report(
         efficiency: counters.total.efficiency(),
         counters,
         thread_times,
+        balance: options.kernel.balance.clone(),
+        balance_rounds,
     }
 }
 

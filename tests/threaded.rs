@@ -172,3 +172,59 @@ fn a_panicking_world_ends_the_run_with_an_error_naming_world_and_step() {
         assert!(err.to_string().contains("world"));
     }
 }
+
+#[test]
+fn threaded_runs_with_balancing_on_match_the_reference_bitwise() {
+    use soda::kernel::{BalanceConfig, LoadSource};
+    let steps = 60;
+    for (name, n) in [("skewed", 64), ("sparse-gas", 48), ("falling-cubes", 27)] {
+        let scene = builtin(name, Some(n), 2).unwrap();
+        let expected = reference_hashes(&scene, steps);
+        for (k, load) in [
+            LoadSource::Measured,
+            LoadSource::CellsComputed,
+            LoadSource::Seeded(k_seed(name)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            for threads in [1usize, 2, 3] {
+                let mode = [
+                    RollbackMode::Cell,
+                    RollbackMode::World,
+                    RollbackMode::Conservative,
+                ][(k + threads) % 3];
+                let balance = BalanceConfig {
+                    period: 3 + k as u64 * 4,
+                    load,
+                    ..BalanceConfig::on()
+                };
+                let config = KernelConfig::new(8).mode(mode).window(8).balance(balance);
+                let report = run_threaded(
+                    scene.model(),
+                    scene.grid(),
+                    scene.initial_bodies(),
+                    &config,
+                    threads,
+                    steps,
+                )
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+                let got: Vec<u64> = report.frames.iter().map(|f| f.hash).collect();
+                assert_eq!(got, expected, "{name} {load:?} threads={threads} {mode:?}");
+                let b = &report.counters.balance;
+                assert_eq!(
+                    b.rounds,
+                    (steps - 1) / (3 + k as u64 * 4),
+                    "{name} {load:?}"
+                );
+                if matches!(load, LoadSource::Seeded(_)) {
+                    assert!(b.cells_moved > 0, "{name}: seeded loads moved no cell");
+                }
+            }
+        }
+    }
+}
+
+fn k_seed(name: &str) -> u64 {
+    name.len() as u64 * 7919
+}

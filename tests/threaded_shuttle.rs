@@ -11,7 +11,7 @@ use soda::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
 use soda::exec::threaded::run_threaded_with;
 use soda::frame::StatesWanted;
 use soda::kernel::synthetic::Particles;
-use soda::kernel::{KernelConfig, PartitionKind, RollbackMode};
+use soda::kernel::{BalanceConfig, KernelConfig, LoadSource, PartitionKind, RollbackMode};
 use soda::ReferenceRun;
 use std::sync::Arc;
 
@@ -79,6 +79,11 @@ fn iterations() -> usize {
 
 /// A small particle scene, its reference hashes, and a kernel configuration per mode.
 fn case(mode: RollbackMode) -> impl Fn() + Send + Sync + 'static {
+    case_with(mode, BalanceConfig::default())
+}
+
+/// [`case`] with load balancing `balance`.
+fn case_with(mode: RollbackMode, balance: BalanceConfig) -> impl Fn() + Send + Sync + 'static {
     let (model, grid, bodies) = Particles::scene(24, [4, 2, 2], false, 5);
     let (mut reference, _) = ReferenceRun::new(model.clone(), grid.clone(), bodies.clone());
     let expected: Arc<Vec<u64>> = Arc::new((0..STEPS).map(|_| reference.advance().hash).collect());
@@ -86,7 +91,8 @@ fn case(mode: RollbackMode) -> impl Fn() + Send + Sync + 'static {
         .mode(mode)
         .window(3)
         .partition(PartitionKind::Random)
-        .partition_seed(2);
+        .partition_seed(2)
+        .balance(balance);
     move || {
         let mut got = Vec::new();
         let report = run_threaded_with::<Particles, ShuttleFacade>(
@@ -127,5 +133,22 @@ fn threaded_coordination_commits_reference_hashes_under_pct_schedules() {
         RollbackMode::Conservative,
     ] {
         shuttle::check_pct(case(mode), iterations(), 3);
+    }
+}
+
+#[test]
+fn balancing_handovers_between_epochs_commit_reference_hashes_under_random_schedules() {
+    // Seeded loads: cells move at steps 2 and 4 whatever the timing.
+    let balance = BalanceConfig {
+        period: 2,
+        load: LoadSource::Seeded(7),
+        ..BalanceConfig::on()
+    };
+    for mode in [
+        RollbackMode::Cell,
+        RollbackMode::World,
+        RollbackMode::Conservative,
+    ] {
+        shuttle::check_random(case_with(mode, balance.clone()), iterations() / 4);
     }
 }

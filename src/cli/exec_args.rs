@@ -4,7 +4,9 @@
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use soda::exec::virtual_exec::parse_schedule;
-use soda::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
+use soda::kernel::{
+    BalanceConfig, KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
+};
 use soda::sim::{ExecutorKind, RunOptions};
 
 /// `--executor` values.
@@ -95,9 +97,38 @@ pub struct ExecutorArgs {
     /// Replay a schedule string (`v1:...`) printed by `soda verify` or a fuzz target.
     #[arg(long, value_name = "STRING")]
     pub schedule: Option<String>,
+    /// Dynamic load balancing by cell cession [default: off]: every --balance-period steps,
+    /// at a committed step, overloaded worlds give cells to their neighbours and starving
+    /// worlds take part of the most loaded one's. Results are bit-identical either way.
+    #[arg(long, value_enum, value_name = "off|on")]
+    pub balance: Option<BalanceArg>,
+    /// Steps between balancing rounds [default: 20].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub balance_period: Option<u64>,
+    /// Load level thresholds as fractions of the mean load, `UNDER,HIGH,OVER`
+    /// [default: 0.8,1.2,1.5]: below UNDER a world is underloaded, above HIGH highly loaded,
+    /// above OVER overloaded.
+    #[arg(long, value_name = "U,H,O")]
+    pub balance_thresholds: Option<String>,
+    /// Weight of the newest load measurement in the exponential smoothing, in (0, 1]
+    /// [default: 0.5].
+    #[arg(long, value_name = "A")]
+    pub balance_smoothing: Option<f64>,
+    /// Rounds during which a cell that moved stays put [default: 2].
+    #[arg(long, value_name = "R")]
+    pub balance_cooldown: Option<u64>,
     /// A deliberate kernel bug, to prove the checks can fire (never for real runs).
     #[arg(long, value_enum, hide = true)]
     pub planted_bug: Option<PlantedBugArg>,
+}
+
+/// `--balance` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BalanceArg {
+    /// Static territories.
+    Off,
+    /// Move cells between worlds as their loads change.
+    On,
 }
 
 /// `--planted-bug` values (hidden).
@@ -129,6 +160,11 @@ impl ExecutorArgs {
             ("--partition", self.partition.is_some()),
             ("--partition-seed", self.partition_seed.is_some()),
             ("--planted-bug", self.planted_bug.is_some()),
+            ("--balance", self.balance.is_some()),
+            ("--balance-period", self.balance_period.is_some()),
+            ("--balance-thresholds", self.balance_thresholds.is_some()),
+            ("--balance-smoothing", self.balance_smoothing.is_some()),
+            ("--balance-cooldown", self.balance_cooldown.is_some()),
         ];
         let virtual_flags = [
             ("--schedule-seed", self.schedule_seed.is_some()),
@@ -177,11 +213,63 @@ impl ExecutorArgs {
             .schedule(schedule)
             .record_schedule(false);
         kernel.planted_bug = self.planted_bug.map_or(PlantedBug::None, Into::into);
+        kernel.balance = self.balance_config()?;
         Ok(RunOptions {
             executor,
             kernel,
             threads,
         })
+    }
+}
+
+impl ExecutorArgs {
+    /// The balancing configuration the `--balance*` flags describe.
+    fn balance_config(&self) -> Result<BalanceConfig> {
+        let mut b = BalanceConfig {
+            enabled: self.balance == Some(BalanceArg::On),
+            ..BalanceConfig::default()
+        };
+        let tuning = self.balance_period.is_some()
+            || self.balance_thresholds.is_some()
+            || self.balance_smoothing.is_some()
+            || self.balance_cooldown.is_some();
+        if tuning && !b.enabled {
+            bail!("the --balance-* options tune load balancing, which is off: add `--balance on`");
+        }
+        if let Some(p) = self.balance_period {
+            b.period = p;
+        }
+        if let Some(t) = &self.balance_thresholds {
+            let v: Vec<f64> = t
+                .split(',')
+                .map(|x| x.trim().parse::<f64>())
+                .collect::<Result<_, _>>()
+                .map_err(|_| {
+                    anyhow::anyhow!(
+                        "--balance-thresholds `{}` is not three numbers `UNDER,HIGH,OVER` \
+                         (for example 0.8,1.2,1.5)",
+                        short(t)
+                    )
+                })?;
+            let [u, h, o] = v[..] else {
+                bail!(
+                    "--balance-thresholds `{}` has {} numbers; give three, `UNDER,HIGH,OVER` \
+                     (for example 0.8,1.2,1.5)",
+                    short(t),
+                    v.len()
+                );
+            };
+            (b.underloaded, b.high, b.overloaded) = (u, h, o);
+        }
+        if let Some(a) = self.balance_smoothing {
+            b.smoothing = a;
+        }
+        if let Some(c) = self.balance_cooldown {
+            b.cooldown = c;
+        }
+        b.validate()
+            .map_err(|e| anyhow::anyhow!("--balance options: {e}"))?;
+        Ok(b)
     }
 }
 

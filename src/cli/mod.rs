@@ -40,7 +40,7 @@ enum Command {
     /// With no arguments: the built-in `falling-cubes` scene, 1,000 cubes, 600 steps, on the
     /// reference executor.
     #[command(after_help = run::AFTER_HELP)]
-    Run(run::RunArgs),
+    Run(Box<run::RunArgs>),
     /// List the built-in scenes, or print one as a TOML scene file to start your own from.
     #[command(after_help = scenes::AFTER_HELP)]
     Scenes(scenes::ScenesArgs),

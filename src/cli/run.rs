@@ -78,6 +78,13 @@ pub struct OutputArgs {
     /// Virtual and threaded executors only.
     #[arg(long, value_name = "FILE")]
     pub trace: Option<PathBuf>,
+
+    /// Draw the territories' evolution into DIR (created if missing): territory-STEP.svg
+    /// for the initial partition and after every balancing round (top view, majority owner
+    /// of each column), and imbalance.svg (max/mean load per round). Virtual and threaded
+    /// executors only.
+    #[arg(long, value_name = "DIR")]
+    pub territories: Option<PathBuf>,
 }
 
 /// Runs the command.
@@ -91,6 +98,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
             );
         }
         options.kernel.trace = true;
+    }
+    if args.output.territories.is_some() && options.executor == soda::sim::ExecutorKind::Reference {
+        bail!(
+            "--territories draws the Time Warp worlds' territories, and the reference executor \
+             has none; add --executor virtual or --executor threaded"
+        );
     }
     let (scene, origin) = args.scene.load()?;
     let initial_bodies = scene.bodies.len();
@@ -143,6 +156,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
         std::fs::write(path, text + "\n")
             .with_context(|| format!("cannot write the trace to {}", path.display()))?;
     }
+    if let Some(dir) = &args.output.territories {
+        write_territories(dir, &scene, &options, &report)?;
+    }
     if args.output.json {
         print(&report_json)
     } else {
@@ -155,6 +171,65 @@ pub fn run(args: &RunArgs) -> Result<()> {
             recorded.as_deref(),
         ))
     }
+}
+
+/// Writes the territory map of the initial partition and after every balancing round, and
+/// the imbalance per round, into `dir`.
+fn write_territories(
+    dir: &std::path::Path,
+    scene: &soda::Scene,
+    options: &soda::sim::RunOptions,
+    report: &RunReport,
+) -> Result<()> {
+    use soda::kernel::{Partition, RunTrace, WorldTrace};
+    let Some(k) = &report.kernel else {
+        return Ok(());
+    };
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create the directory {}", dir.display()))?;
+    let grid = scene.grid();
+    let positions: Vec<[f32; 3]> = scene
+        .initial_bodies()
+        .iter()
+        .map(<RigidBodyModel as soda::CellModel>::position)
+        .collect();
+    let initial = Partition::build(
+        &options.kernel.partition,
+        &grid,
+        k.worlds,
+        &positions,
+        options.kernel.partition_seed,
+    );
+    let maps = std::iter::once((0, initial.owners().to_vec()))
+        .chain(k.balance_rounds.iter().map(|r| (r.step, r.owners.clone())));
+    let mut written = 0;
+    for (step, owners) in maps {
+        let parts = vec![WorldTrace::default(); k.worlds];
+        let trace = RunTrace::merge(grid.dims, owners, parts, Vec::new());
+        let path = dir.join(format!("territory-{step:06}.svg"));
+        super::charts::territory_map(&trace, &path)?;
+        written += 1;
+    }
+    let series = vec![(
+        "max / mean load".to_string(),
+        k.balance_rounds
+            .iter()
+            .map(|r| (r.step as f64, r.imbalance))
+            .collect::<Vec<_>>(),
+    )];
+    let imbalance = dir.join("imbalance.svg");
+    super::charts::line_chart(
+        &imbalance,
+        "Load imbalance at each balancing round",
+        ("committed step", "max / mean load per step"),
+        &series,
+    )?;
+    eprintln!(
+        "wrote {written} territory maps and {} to {}",
+        imbalance.display(),
+        dir.display()
+    );
+    Ok(())
 }
 
 /// A progress bar on stderr when stderr is a terminal, the output is not JSON and the run is
@@ -289,6 +364,16 @@ fn summary(
                 k.counters.gvt_advances, c.peak_log_bytes
             ),
         ));
+        if k.balance.enabled {
+            let b = &k.counters.balance;
+            lines.push((
+                "balancing",
+                format!(
+                    "{} rounds, {} cells moved, {} famines, imbalance {:.3} (max/mean load)",
+                    b.rounds, b.cells_moved, b.famines, b.imbalance
+                ),
+            ));
+        }
         if let Some(t) = &k.thread_times {
             lines.push((
                 "thread time",

@@ -9,8 +9,8 @@ pub mod virtual_exec;
 use crate::frame::Event;
 use crate::grid::Grid;
 use crate::kernel::trace::{GvtSample, RunTrace};
-use crate::kernel::{KernelConfig, Partition, World, WorldId};
-use crate::model::CellModel;
+use crate::kernel::{Balancer, KernelConfig, Partition, World, WorldId};
+use crate::model::{CellModel, Step};
 use crate::state::CellStates;
 use std::sync::Arc;
 
@@ -80,4 +80,47 @@ pub(crate) fn collect_trace<M: CellModel>(
         .collect();
     let parts = worlds.iter_mut().map(|w| w.take_record()).collect();
     RunTrace::merge(grid.dims, owners, parts, gvt)
+}
+
+/// The whole domain's states at step `step`, gathered from the worlds (each holds its own
+/// cells'); `step` must be held by every world (at GVT − 1 or later, not fossil-collected).
+pub(crate) fn gather_states<'a, M: CellModel + 'a>(
+    grid: &Grid,
+    worlds: impl IntoIterator<Item = &'a World<M>>,
+    step: Step,
+) -> CellStates<M::State> {
+    let all: Vec<M::State> = worlds
+        .into_iter()
+        .flat_map(|w| w.state_at(step).cloned())
+        .collect();
+    let mut outside = Vec::new();
+    let states = CellStates::binned::<M>(grid, all, step, &mut outside);
+    debug_assert!(outside.is_empty(), "a held state lies outside the grid");
+    states
+}
+
+/// A balancing round at committed step `step` (SPEC.md §K13): hands `loads` (per world, per
+/// committed step since the last round), `leads` (each world's mean LVT − GVT meanwhile) and
+/// the body count of every cell to the balancer; if cells move, every world takes its new territory at `step` with its final
+/// states ([`World::reterritory`]) and the new partition is returned. The caller must
+/// discard every message in transit and let the worlds [`World::start`] again.
+pub(crate) fn balance_round<'a, M: CellModel + 'a>(
+    balancer: &mut Balancer,
+    grid: &Grid,
+    partition: &Partition,
+    worlds: impl IntoIterator<Item = &'a mut World<M>>,
+    loads: &[f64],
+    leads: &[f64],
+    step: Step,
+) -> Option<Arc<Partition>> {
+    let mut worlds: Vec<&mut World<M>> = worlds.into_iter().collect();
+    let states = gather_states(grid, worlds.iter().map(|w| &**w), step);
+    let bodies: Vec<u32> = (0..grid.cell_count())
+        .map(|c| states.cell_at(c).len() as u32)
+        .collect();
+    let new = Arc::new(balancer.round(grid, partition, loads, leads, &bodies, step)?);
+    for w in worlds.iter_mut() {
+        w.reterritory(new.clone(), &states, step);
+    }
+    Some(new)
 }

@@ -21,6 +21,8 @@
 use super::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex, StdFacade};
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
+use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
+use crate::kernel::config::LoadSource;
 use crate::kernel::counters::Counters;
 use crate::kernel::message::Message;
 use crate::kernel::partition::WorldId;
@@ -99,6 +101,8 @@ pub struct ThreadedReport {
     pub initial_events: Vec<Event>,
     /// The run trace, if `KernelConfig::trace` was on (times: seconds since the start).
     pub trace: Option<RunTrace>,
+    /// The load balancing rounds (empty when balancing is off).
+    pub balance: Vec<RoundRecord>,
 }
 
 const RUNNING: u64 = 0;
@@ -124,7 +128,9 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     committed: F::Atomic,
     gvt_round: F::Atomic,
     status: F::Atomic,
-    target: Step,
+    /// The last step of the current epoch: the run's last step, or the next balancing
+    /// round's (the worlds stop there so every state at it is final when cells move).
+    target: F::Atomic,
     optimistic: bool,
     wanted: StatesWanted,
     assembly: F::Mutex<Assembly<M::State>>,
@@ -135,10 +141,32 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     started: Instant,
 }
 
-/// A world and the last step it has handed to the frame assembly.
+/// A world, the last step it has handed to the frame assembly, and the CPU seconds its
+/// actions took since the last balancing round (its measured load).
 struct Slot<M: CellModel> {
     world: World<M>,
     contributed: Step,
+    busy: f64,
+    /// The summed LVT − GVT after its actions since the last round, and their number.
+    lead: (f64, u64),
+}
+
+/// CPU seconds the calling thread has run (not counting time other processes took the
+/// core), for load measurements that hold on a shared machine; wall-clock time where the
+/// thread clock is unavailable.
+fn thread_cpu_seconds() -> f64 {
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `t` is a valid, writable timespec and the clock id is a constant.
+    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) } == 0;
+    if ok {
+        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+    } else {
+        thread_local!(static START: Instant = Instant::now());
+        START.with(|s| s.elapsed().as_secs_f64())
+    }
 }
 
 /// Committed steps being assembled from the worlds' contributions.
@@ -242,7 +270,9 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
         let gvt = self.gvt.load();
         self.contribute(&mut slot, gvt);
-        let world = &mut slot.world;
+        let Slot {
+            world, busy, lead, ..
+        } = &mut *slot;
         if self.postpone(w, world) {
             self.published[w].store(world.bound());
             drop(slot);
@@ -257,8 +287,12 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             }
             let kind = world.next_action();
             let a0 = Instant::now();
+            let c0 = thread_cpu_seconds();
             let acted = catch_unwind(AssertUnwindSafe(|| world.act(gvt)));
             let spent = a0.elapsed().as_secs_f64();
+            *busy += thread_cpu_seconds() - c0;
+            lead.0 += world.lvt().saturating_sub(gvt) as f64;
+            lead.1 += 1;
             *match kind {
                 ActionKind::Receive => &mut times.receive_seconds,
                 ActionKind::Repair => &mut times.rollback_seconds,
@@ -318,7 +352,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// Hands the world's states of the steps below `gvt` not yet handed over to the frame
     /// assembly, then fossil-collects its logs.
     fn contribute(&self, slot: &mut Slot<M>, gvt: Step) {
-        let last = (gvt - 1).min(self.target);
+        let last = (gvt - 1).min(self.target.load());
         if slot.contributed >= last {
             return;
         }
@@ -372,7 +406,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         self.out.lock().pending.extend(frames);
         drop(assembly);
         self.committed.store(last_step);
-        if last_step >= self.target {
+        if last_step >= self.target.load() {
             self.status.store(DONE);
         }
     }
@@ -387,7 +421,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         let mut advanced = false;
         for _ in 0..4 {
             let before = self.version.load();
-            let mut least = self.target + 1;
+            let mut least = self.target.load() + 1;
             for w in 0..self.worlds.len() {
                 least = least
                     .min(self.published[w].load())
@@ -431,7 +465,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         let can_act = worlds.iter().any(|s| s.world.wants_to_act(gvt));
         let to_commit = worlds
             .iter()
-            .any(|s| s.contributed < (gvt - 1).min(self.target));
+            .any(|s| s.contributed < (gvt - 1).min(self.target.load()));
         let bounds = worlds
             .iter()
             .map(|s| s.world.bound())
@@ -441,7 +475,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             && !can_act
             && !to_commit
             && bounds <= gvt
-            && self.committed.load() < self.target
+            && self.committed.load() < self.target.load()
         {
             drop(inboxes);
             drop(worlds);
@@ -556,6 +590,11 @@ pub fn run_threaded<M: CellModel + 'static>(
 /// [`run_threaded`] over any [`Facade`] (shuttle tests pass their own), handing every
 /// committed frame, in step order, to `sink` on the calling thread (the output stage),
 /// with the committed states (sorted by id) of the steps `wanted` asks for.
+///
+/// With balancing on (`config.balance`), the run is cut into epochs of `period` steps: the
+/// worlds stop at the epoch's last step, the threads finish and are joined (GVT is then
+/// that step + 1, every state at it final), a balancing round moves cells between the
+/// worlds from their busy time per committed step, and the next epoch starts new threads.
 #[allow(clippy::too_many_arguments)]
 pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     model: M,
@@ -573,12 +612,14 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         mut worlds,
         events: initial_events,
         grid,
-        partition,
+        mut partition,
     } = super::build_worlds(model, grid, initial, config);
     let n = worlds.len();
+    let mut balancer = Balancer::new(&config.balance, grid.cell_count());
+    let mut epoch_end = steps.min(balancer.next_round_after(0));
     let mut inboxes: Vec<Vec<Message<M::State>>> = (0..n).map(|_| Vec::new()).collect();
     for w in &mut worlds {
-        w.set_end(steps);
+        w.set_end(epoch_end);
         for m in w.start() {
             inboxes[m.dst_world as usize].push(m);
         }
@@ -595,6 +636,8 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
                 F::Mutex::new(Slot {
                     world,
                     contributed: 0,
+                    busy: 0.0,
+                    lead: (0.0, 0),
                 })
             })
             .collect(),
@@ -608,7 +651,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         committed: F::Atomic::new(0),
         gvt_round: F::Atomic::new(0),
         status: F::Atomic::new(if steps == 0 { DONE } else { RUNNING }),
-        target: steps,
+        target: F::Atomic::new(epoch_end),
         optimistic: config.mode != crate::kernel::RollbackMode::Conservative,
         wanted,
         assembly: F::Mutex::new(Assembly {
@@ -620,7 +663,123 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         trace: config.trace,
         started: start,
     });
-    for w in 0..n {
+    // The output stage: hand committed frames to the sink while the workers run.
+    let mut frames = Vec::new();
+    let mut deliver = |batch: VecDeque<(Frame, Option<Vec<M::State>>)>| {
+        for (frame, states) in batch {
+            if frames.len() < steps as usize {
+                let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
+                sink(&frame, refs.as_deref());
+                frames.push(frame);
+            }
+        }
+    };
+    let mut busy_total = vec![0.0f64; n];
+    let mut last_round: Step = 0;
+    let mut computed_at_round = vec![0u64; n];
+    loop {
+        run_epoch(&shared, threads, &mut deliver)?;
+        let committed = shared.committed.load();
+        if committed >= steps || steps == 0 {
+            break;
+        }
+        // A balancing round at the epoch's last step: every world has contributed it, so
+        // GVT = committed + 1 and every state at `committed` is final.
+        let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
+        let span = (committed - last_round).max(1) as f64;
+        let loads: Vec<f64> = locked
+            .iter()
+            .enumerate()
+            .map(|(w, s)| match config.balance.load {
+                LoadSource::CellsComputed => {
+                    (s.world.counters().cells_computed - computed_at_round[w]) as f64 / span
+                }
+                _ => s.busy / span,
+            })
+            .collect();
+        let leads: Vec<f64> = locked
+            .iter()
+            .map(|s| s.lead.0 / s.lead.1.max(1) as f64)
+            .collect();
+        for (w, s) in locked.iter_mut().enumerate() {
+            busy_total[w] += s.busy;
+            s.busy = 0.0;
+            s.lead = (0.0, 0);
+            computed_at_round[w] = s.world.counters().cells_computed;
+        }
+        let moved = super::balance_round(
+            &mut balancer,
+            &grid,
+            &partition,
+            locked.iter_mut().map(|s| &mut s.world),
+            &loads,
+            &leads,
+            committed,
+        );
+        last_round = committed;
+        epoch_end = steps.min(balancer.next_round_after(committed));
+        if let Some(p) = moved {
+            partition = p;
+            // Messages in transit belong to the old owner map: the worlds start again.
+            for (w, inbox) in shared.inboxes.iter().enumerate() {
+                inbox.lock().clear();
+                shared.inbox_min[w].store(u64::MAX);
+            }
+            for s in locked.iter_mut() {
+                for m in s.world.start() {
+                    let d = m.dst_world as usize;
+                    let affects = m.affects();
+                    shared.inboxes[d].lock().push(m);
+                    shared.lower(&shared.inbox_min[d], affects);
+                }
+            }
+        }
+        for (w, s) in locked.iter_mut().enumerate() {
+            s.world.set_end(epoch_end);
+            shared.published[w].store(s.world.bound());
+            shared.scheduled[w].store(1);
+        }
+        drop(locked);
+        shared.target.store(epoch_end);
+        shared.status.store(RUNNING);
+    }
+    let mut out = std::mem::take(&mut *shared.out.lock());
+    deliver(std::mem::take(&mut out.pending));
+    let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
+    for (w, s) in locked.iter_mut().enumerate() {
+        busy_total[w] += s.busy;
+    }
+    let world_counters = locked.iter().map(|s| s.world.counters().clone()).collect();
+    let trace = config.trace.then(|| {
+        let mut worlds: Vec<&mut World<M>> = locked.iter_mut().map(|s| &mut s.world).collect();
+        super::collect_trace(&grid, &partition, &mut worlds, out.gvt_samples)
+    });
+    drop(locked);
+    let mut counters = Counters::from_worlds(world_counters, out.gvt_advances, shared.gvt.load());
+    counters.balance = balancer.counters(imbalance(&busy_total));
+    Ok(ThreadedReport {
+        frames,
+        counters,
+        times: out.times,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        threads,
+        initial_events,
+        trace,
+        balance: balancer.history().to_vec(),
+    })
+}
+
+/// One epoch: every world is queued, `threads` workers run until the epoch's last step is
+/// committed (or the run fails), the output stage delivers frames meanwhile.
+fn run_epoch<M: CellModel + 'static, F: Facade>(
+    shared: &Arc<Shared<M, F>>,
+    threads: usize,
+    deliver: &mut impl FnMut(VecDeque<(Frame, Option<Vec<M::State>>)>),
+) -> Result<(), ExecError> {
+    // Tasks left from an earlier epoch are stale: every world is queued once again.
+    while !shared.injector.steal().is_empty() {}
+    for w in 0..shared.worlds.len() {
+        shared.scheduled[w].store(1);
         shared.injector.push(w);
     }
     let locals: Vec<Worker<usize>> = (0..threads).map(|_| Worker::new_fifo()).collect();
@@ -634,17 +793,6 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
             F::spawn(move || shared.worker_loop(me, local, stealers))
         })
         .collect();
-    // The output stage: hand committed frames to the sink while the workers run.
-    let mut frames = Vec::new();
-    let mut deliver = |batch: VecDeque<(Frame, Option<Vec<M::State>>)>| {
-        for (frame, states) in batch {
-            if frames.len() < steps as usize {
-                let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
-                sink(&frame, refs.as_deref());
-                frames.push(frame);
-            }
-        }
-    };
     while shared.status.load() == RUNNING {
         let batch = std::mem::take(&mut shared.out.lock().pending);
         if batch.is_empty() {
@@ -665,23 +813,5 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     if let Some(e) = thread_error {
         return Err(ExecError::Thread(e));
     }
-    let mut out = std::mem::take(&mut *shared.out.lock());
-    deliver(std::mem::take(&mut out.pending));
-    let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
-    let world_counters = locked.iter().map(|s| s.world.counters().clone()).collect();
-    let trace = config.trace.then(|| {
-        let mut worlds: Vec<&mut World<M>> = locked.iter_mut().map(|s| &mut s.world).collect();
-        super::collect_trace(&grid, &partition, &mut worlds, out.gvt_samples)
-    });
-    drop(locked);
-    let counters = Counters::from_worlds(world_counters, out.gvt_advances, shared.gvt.load());
-    Ok(ThreadedReport {
-        frames,
-        counters,
-        times: out.times,
-        wall_seconds: start.elapsed().as_secs_f64(),
-        threads,
-        initial_events,
-        trace,
-    })
+    Ok(())
 }

@@ -39,6 +39,7 @@
 
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
+use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
 use crate::kernel::config::RollbackMode;
 use crate::kernel::config::{KernelConfig, ScheduleSpec};
 use crate::kernel::counters::Counters;
@@ -161,6 +162,17 @@ pub struct VirtualRun<M: CellModel> {
     gvt_advances: u64,
     started: std::time::Instant,
     gvt_samples: Vec<GvtSample>,
+    /// Load balancing: the balancer, the next round's step, the last round's step and
+    /// every world's cell computations then (the deterministic load proxy).
+    balancer: Balancer,
+    next_round: Step,
+    last_round: Step,
+    computed_at_round: Vec<u64>,
+    /// Per world, the summed LVT − GVT after its actions since the last round, and their
+    /// number.
+    leads: Vec<(f64, u64)>,
+    /// One copy of every input posted (re-posted to the worlds after a balancing round).
+    inputs_posted: Vec<Message<M::State>>,
 }
 
 impl<M: CellModel> VirtualRun<M> {
@@ -182,6 +194,8 @@ impl<M: CellModel> VirtualRun<M> {
             mut worlds,
             events,
         } = super::build_worlds(model, grid, initial, config);
+        let balancer = Balancer::new(&config.balance, grid.cell_count());
+        let computed_at_round = vec![0; worlds.len()];
         let mut run = VirtualRun {
             config: config.clone(),
             inputs: 0,
@@ -201,7 +215,14 @@ impl<M: CellModel> VirtualRun<M> {
             gvt_advances: 0,
             started: std::time::Instant::now(),
             gvt_samples: Vec::new(),
+            balancer,
+            next_round: Step::MAX,
+            last_round: 0,
+            computed_at_round,
+            leads: vec![(0.0, 0); worlds.len()],
+            inputs_posted: Vec::new(),
         };
+        run.next_round = run.balancer.next_round_after(0);
         for w in &mut worlds {
             let msgs = w.start();
             run.post(msgs);
@@ -278,12 +299,100 @@ impl<M: CellModel> VirtualRun<M> {
                 removes: removes.clone(),
             })
             .collect();
-        if conservative {
+        self.inputs_posted.push(msgs[0].clone());
+        self.deliver_inputs(msgs);
+    }
+
+    /// Inputs go through the in-flight pool (optimistic modes) or straight into the inboxes
+    /// (conservative).
+    fn deliver_inputs(&mut self, msgs: Vec<Message<M::State>>) {
+        if self.config.mode == RollbackMode::Conservative {
             for m in msgs {
                 self.worlds[m.dst_world as usize].receive(m);
             }
         } else {
             self.post(msgs);
+        }
+    }
+
+    /// The furthest step the worlds may compute to: `end`, but never past the next
+    /// balancing round (where every state must be final before cells move).
+    fn world_end(&self, end: Step) -> Step {
+        end.min(self.next_round)
+    }
+
+    /// The balancing rounds held so far (empty when balancing is off).
+    pub fn balance_history(&self) -> &[RoundRecord] {
+        self.balancer.history()
+    }
+
+    /// A balancing round, if one is due at the committed step (then GVT = committed + 1:
+    /// every state at it is final). Loads are cell computations per committed step since
+    /// the last round (or seeded), so decisions replay with the schedule. If cells move, the
+    /// worlds take their new territories, the messages in transit are dropped, the worlds
+    /// send their ghosts again and pending inputs are re-posted.
+    fn balance_if_due(&mut self) {
+        if self.committed != self.next_round {
+            return;
+        }
+        let step = self.committed;
+        debug_assert_eq!(self.gvt, step + 1, "balancing below GVT");
+        let steps = (step - self.last_round).max(1) as f64;
+        let computed: Vec<u64> = self
+            .worlds
+            .iter()
+            .map(|w| w.counters().cells_computed)
+            .collect();
+        let loads: Vec<f64> = computed
+            .iter()
+            .zip(&self.computed_at_round)
+            .map(|(now, then)| (now - then) as f64 / steps)
+            .collect();
+        let leads: Vec<f64> = self
+            .leads
+            .iter()
+            .map(|&(sum, n)| sum / n.max(1) as f64)
+            .collect();
+        self.leads.iter_mut().for_each(|l| *l = (0.0, 0));
+        let moved = super::balance_round(
+            &mut self.balancer,
+            &self.grid,
+            &self.partition,
+            self.worlds.iter_mut(),
+            &loads,
+            &leads,
+            step,
+        );
+        if let Some(p) = moved {
+            self.partition = p;
+            self.pool.clear();
+            self.in_flight.clear();
+            for w in 0..self.worlds.len() {
+                let msgs = self.worlds[w].start();
+                self.post(msgs);
+            }
+            let pending: Vec<Message<M::State>> = self
+                .inputs_posted
+                .iter()
+                .filter(|m| m.step > step)
+                .cloned()
+                .collect();
+            for m in pending {
+                let copies = (0..self.worlds.len() as WorldId)
+                    .map(|w| Message {
+                        dst_world: w,
+                        ..m.clone()
+                    })
+                    .collect();
+                self.deliver_inputs(copies);
+            }
+        }
+        self.computed_at_round = computed;
+        self.last_round = step;
+        self.next_round = self.balancer.next_round_after(step);
+        let end = self.world_end(self.end);
+        for w in &mut self.worlds {
+            w.set_end(end);
         }
     }
 
@@ -315,6 +424,8 @@ impl<M: CellModel> VirtualRun<M> {
             self.gvt,
         );
         c.decisions = self.turn;
+        let computed: Vec<f64> = c.worlds.iter().map(|w| w.cells_computed as f64).collect();
+        c.balance = self.balancer.counters(imbalance(&computed));
         c
     }
 
@@ -348,8 +459,9 @@ impl<M: CellModel> VirtualRun<M> {
     /// earlier (to observe a run in the middle of its speculation).
     pub fn set_horizon(&mut self, end: Step) {
         self.end = self.end.max(end);
+        let end = self.world_end(self.end);
         for w in &mut self.worlds {
-            w.set_end(self.end);
+            w.set_end(end);
         }
     }
 
@@ -377,11 +489,13 @@ impl<M: CellModel> VirtualRun<M> {
         let target = self.committed + steps;
         self.limit = target;
         self.end = self.end.max(target);
+        let end = self.world_end(target);
         for w in &mut self.worlds {
-            w.set_end(target);
+            w.set_end(end);
         }
         self.update_gvt(wanted, &mut sink);
         while self.committed < target {
+            self.balance_if_due();
             self.decide();
             self.update_gvt(wanted, &mut sink);
         }
@@ -413,6 +527,9 @@ impl<M: CellModel> VirtualRun<M> {
                 self.worlds[acts[i]].trace_time(now);
             }
             let msgs = self.worlds[acts[i]].act(gvt);
+            let lead = &mut self.leads[acts[i]];
+            lead.0 += self.worlds[acts[i]].lvt().saturating_sub(gvt) as f64;
+            lead.1 += 1;
             self.post(msgs);
         } else {
             let m = self.pool.remove(i - acts.len());

@@ -120,7 +120,7 @@ pub enum PlantedBug {
 }
 
 /// The configuration of a kernel run.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct KernelConfig {
     /// Number of worlds (logical processes), at least 1.
     pub worlds: usize,
@@ -141,6 +141,9 @@ pub struct KernelConfig {
     /// Record a run trace (LVT over time, rollbacks, GVT advances, messages per step).
     /// Observation only: the committed bits are the same either way.
     pub trace: bool,
+    /// Dynamic load balancing (off by default).
+    #[serde(default)]
+    pub balance: BalanceConfig,
     /// A deliberate bug, for tests that prove the checks can fire.
     #[doc(hidden)]
     pub planted_bug: PlantedBug,
@@ -157,6 +160,7 @@ impl Default for KernelConfig {
             schedule: ScheduleSpec::Seeded(0),
             record_schedule: true,
             trace: false,
+            balance: BalanceConfig::default(),
             planted_bug: PlantedBug::None,
         }
     }
@@ -207,9 +211,117 @@ impl KernelConfig {
         self
     }
 
+    /// Sets the load balancing configuration.
+    pub fn balance(mut self, balance: BalanceConfig) -> Self {
+        self.balance = balance;
+        self
+    }
+
     /// Turns decision recording on or off.
     pub fn record_schedule(mut self, on: bool) -> Self {
         self.record_schedule = on;
         self
+    }
+}
+
+/// Where a balancing round reads each world's load (SPEC.md §K13). Whatever the
+/// source, balancing only moves cells at a step every world has committed, so the committed
+/// bits never depend on it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum LoadSource {
+    /// Busy wall-clock time per committed step (threaded executor; the virtual executor,
+    /// which must replay exactly, uses [`LoadSource::CellsComputed`] instead).
+    #[default]
+    Measured,
+    /// Cell computations per committed step (rollbacks included): a deterministic cost
+    /// proxy, so decisions replay from the schedule.
+    CellsComputed,
+    /// Random loads from ChaCha8 seeded with this value and the round number: random but
+    /// replayable decisions, for tests that force cessions and famine.
+    Seeded(u64),
+}
+
+/// Dynamic load balancing by cell cession (thesis §3.3; SPEC.md §K13).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct BalanceConfig {
+    /// Balancing on or off (`--balance on|off`).
+    pub enabled: bool,
+    /// Steps between balancing rounds (each round happens at a committed step).
+    pub period: u64,
+    /// A world whose smoothed load is below this fraction of the mean is underloaded.
+    pub underloaded: f64,
+    /// Above this multiple of the mean a world is highly loaded (it gives cells to
+    /// underloaded neighbours).
+    pub high: f64,
+    /// Above this multiple of the mean a world is overloaded (it gives cells to any less
+    /// loaded neighbour on its own initiative).
+    pub overloaded: f64,
+    /// Weight of the newest measurement in the exponential smoothing of loads, in (0, 1].
+    pub smoothing: f64,
+    /// Rounds during which a cell that moved cannot move again (hysteresis).
+    pub cooldown: u64,
+    /// Most cells one world gives one neighbour in one round.
+    pub max_cells: usize,
+    /// Where loads come from.
+    pub load: LoadSource,
+    /// Seed of the tie-breaks between equal candidates.
+    pub seed: u64,
+}
+
+impl Default for BalanceConfig {
+    fn default() -> Self {
+        BalanceConfig {
+            enabled: false,
+            period: 20,
+            underloaded: 0.8,
+            high: 1.2,
+            overloaded: 1.5,
+            smoothing: 0.5,
+            cooldown: 2,
+            max_cells: 64,
+            load: LoadSource::Measured,
+            seed: 0,
+        }
+    }
+}
+
+impl BalanceConfig {
+    /// Balancing on with the default thresholds.
+    pub fn on() -> Self {
+        BalanceConfig {
+            enabled: true,
+            ..Self::default()
+        }
+    }
+
+    /// Checks the thresholds: `0 < underloaded ≤ 1 ≤ high ≤ overloaded`,
+    /// `0 < smoothing ≤ 1`, `period ≥ 1`, `max_cells ≥ 1`. The error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let ok = self.underloaded > 0.0
+            && self.underloaded <= 1.0
+            && self.high >= 1.0
+            && self.overloaded >= self.high;
+        if !ok {
+            return Err(format!(
+                "balance thresholds must satisfy 0 < underloaded <= 1 <= high <= overloaded \
+                 (got underloaded {}, high {}, overloaded {})",
+                self.underloaded, self.high, self.overloaded
+            ));
+        }
+        if !(self.smoothing > 0.0 && self.smoothing <= 1.0) {
+            return Err(format!(
+                "balance smoothing must be in (0, 1] (got {})",
+                self.smoothing
+            ));
+        }
+        if self.period == 0 {
+            return Err("balance period must be at least 1 step".into());
+        }
+        if self.max_cells == 0 {
+            return Err("balance max_cells must be at least 1".into());
+        }
+        Ok(())
     }
 }

@@ -131,6 +131,23 @@ pub struct Counters {
     pub gvt: u64,
     /// Scheduler decisions taken (virtual executor).
     pub decisions: u64,
+    /// Load balancing (all zero when it is off).
+    pub balance: BalanceCounters,
+}
+
+/// What load balancing did over a run (SPEC.md §K13).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct BalanceCounters {
+    /// Balancing rounds held (one per period, at a committed step).
+    pub rounds: u64,
+    /// Cells that changed owner, summed over rounds.
+    pub cells_moved: u64,
+    /// Worlds that fought famine (handed their territory over and took part of the most
+    /// loaded world's), summed over rounds.
+    pub famines: u64,
+    /// Max over mean of the worlds' load summed over the run (CPU seconds of their actions
+    /// in threaded runs, cell computations in virtual runs); 1 is perfect balance.
+    pub imbalance: f64,
 }
 
 impl Counters {
@@ -146,6 +163,7 @@ impl Counters {
             gvt_advances,
             gvt,
             decisions: 0,
+            balance: BalanceCounters::default(),
         }
     }
 }

@@ -13,9 +13,11 @@
 //! - [`message`]: ghost / migrate / anti-messages and their total order;
 //! - [`counters`]: per-world and total statistics and their formulas;
 //! - [`gvt`]: the global virtual time rule;
+//! - [`balance`]: load balancing by cell cession (load levels, cession, famine);
 //! - [`world`]: one logical process (receive, act, fossil-collect);
 //! - [`synthetic`]: a tiny non-physics cell model for tests, benches and fuzzing.
 
+pub mod balance;
 pub mod config;
 pub mod counters;
 pub mod gvt;
@@ -25,8 +27,11 @@ pub mod synthetic;
 pub mod trace;
 pub mod world;
 
-pub use config::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
-pub use counters::{Counters, WorldCounters};
+pub use balance::{Balancer, LoadLevel, RoundRecord};
+pub use config::{
+    BalanceConfig, KernelConfig, LoadSource, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
+};
+pub use counters::{BalanceCounters, Counters, WorldCounters};
 pub use message::{Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
 pub use trace::{RunTrace, WorldTrace};

@@ -251,6 +251,20 @@ impl<M: CellModel> World<M> {
         config: &KernelConfig,
         initial: &CellStates<M::State>,
     ) -> Self {
+        Self::at_step(id, model, grid, part, config, initial, 0)
+    }
+
+    /// World `id` of `part`, starting at step `step` from the final states `states` (the
+    /// whole domain's, binned over `grid`): its logs hold step `step` only.
+    fn at_step(
+        id: WorldId,
+        model: Arc<M>,
+        grid: Arc<Grid>,
+        part: Arc<Partition>,
+        config: &KernelConfig,
+        states: &CellStates<M::State>,
+        step: Step,
+    ) -> Self {
         let cells = part.cells_of(id).to_vec();
         let targets = cells
             .iter()
@@ -267,7 +281,7 @@ impl<M: CellModel> World<M> {
             .collect();
         let mut slot = Slot::new(cells.len());
         for (x, &c) in cells.iter().enumerate() {
-            slot.states[x] = initial.cell_at(c as usize).to_vec();
+            slot.states[x] = states.cell_at(c as usize).to_vec();
             slot.known[x] = true;
         }
         let n = cells.len();
@@ -281,11 +295,11 @@ impl<M: CellModel> World<M> {
             bug: config.planted_bug,
             cells,
             targets,
-            base: 0,
-            head: 0,
-            end: 0,
-            next: vec![0; n],
-            next_min: if n == 0 { Step::MAX } else { 0 },
+            base: step,
+            head: step,
+            end: step,
+            next: vec![step; n],
+            next_min: if n == 0 { Step::MAX } else { step },
             idle_at: None,
             slots: VecDeque::from([slot]),
             dirty: BTreeMap::new(),
@@ -294,6 +308,36 @@ impl<M: CellModel> World<M> {
             scratch: Vec::new(),
             record: None,
         }
+    }
+
+    /// Load balancing's handover (SPEC.md §K13): the world takes the territory `part`
+    /// gives it at step `step`, which every world has committed (GVT = `step` + 1, so every
+    /// state at `step` is final and nothing later was committed). Its logs restart at `step`
+    /// from `states`, the whole domain's final states there, exactly as a world started at
+    /// `step` would hold them: the final state of a cell is its whole log at GVT, and it
+    /// moves with the cell. Speculative states, messages, dirty steps and the inbox are
+    /// dropped; [`World::start`] then sends the ghosts of `step` under the new owner map.
+    /// Counters and the trace carry on; the end is reset to `step` (raise it with
+    /// [`World::set_end`]).
+    pub fn reterritory(&mut self, part: Arc<Partition>, states: &CellStates<M::State>, step: Step) {
+        let config = KernelConfig {
+            mode: self.mode,
+            window: self.window,
+            planted_bug: self.bug,
+            ..KernelConfig::default()
+        };
+        let mut fresh = Self::at_step(
+            self.id,
+            self.model.clone(),
+            self.grid.clone(),
+            part,
+            &config,
+            states,
+            step,
+        );
+        fresh.counters = std::mem::take(&mut self.counters);
+        fresh.record = self.record.take();
+        *self = fresh;
     }
 
     /// Starts (or stops) recording this world's part of a run trace ([`WorldTrace`]).
@@ -339,11 +383,13 @@ impl<M: CellModel> World<M> {
         self.end = self.end.max(end);
     }
 
-    /// The initial messages: ghosts of the border cells at step 0.
+    /// The initial messages: ghosts of the border cells at the starting step (0, or the
+    /// step of the last [`World::reterritory`]).
     pub fn start(&mut self) -> Vec<Message<M::State>> {
         let mut out = Vec::new();
+        let step = self.base;
         for x in 0..self.cells.len() {
-            self.send_ghost(x, 0, &mut out);
+            self.send_ghost(x, step, &mut out);
         }
         if let Some(r) = &mut self.record {
             for m in &out {

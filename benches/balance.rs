@@ -1,0 +1,180 @@
+//! Load balancing off against on, side by side in one run: the built-in `skewed` scene
+//! (`BAL_OBJECTS` cubes, default 2000, all in one corner) for `BAL_STEPS` steps (default
+//! 200) with `BAL_WORLDS` worlds (default 8) on `BAL_THREADS` threads (default 2), `cell`
+//! mode, window 16, blocks partition. Runs off and on alternately `BAL_REPEATS` times
+//! (default 3) and prints each run's wall time, the medians and their ratio, the run-wide
+//! imbalance (max/mean busy seconds per world) and the balancing counters; every run's
+//! committed hashes must be identical.
+//!
+//! Imbalance over time: one more run of each with a balancing round every `BAL_PERIOD`
+//! steps (default 20) — "off" as a monitor only (thresholds that never trigger a move, so it
+//! pays the same rounds) — written with the on run's cells moved per round to
+//! `target/balance/imbalance.csv`.
+//!
+//! Wall times on a shared 2-core machine are noisy: compare within one run, read the
+//! medians. Run: `cargo bench --bench balance`; `cargo bench --bench balance -- --test` (or
+//! `cargo test --benches`) runs a tiny version.
+
+use soda::exec::threaded::{run_threaded, ThreadedReport};
+use soda::kernel::{BalanceConfig, KernelConfig, RollbackMode};
+use soda::scene::builtin::builtin;
+use std::io::Write;
+
+fn quick() -> bool {
+    let args: Vec<String> = std::env::args().collect();
+    !args.iter().any(|a| a == "--bench") || args.iter().any(|a| a == "--test")
+}
+
+fn env(name: &str, default: u64, quick_value: u64) -> u64 {
+    if quick() {
+        return quick_value;
+    }
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
+}
+
+fn main() {
+    let objects = env("BAL_OBJECTS", 2000, 200) as usize;
+    let steps = env("BAL_STEPS", 200, 30);
+    let worlds = env("BAL_WORLDS", 8, 8) as usize;
+    let threads = env("BAL_THREADS", 2, 2) as usize;
+    let repeats = env("BAL_REPEATS", 3, 1);
+    let period = env("BAL_PERIOD", 20, 10);
+    let scene = builtin("skewed", Some(objects), 0).expect("built-in scene");
+    let on = BalanceConfig {
+        period,
+        ..BalanceConfig::on()
+    };
+    let monitor = BalanceConfig {
+        underloaded: 1e-12,
+        high: 1e12,
+        overloaded: 1e12,
+        ..on.clone()
+    };
+    let run = |balance: &BalanceConfig| -> ThreadedReport {
+        let config = KernelConfig::new(worlds)
+            .mode(RollbackMode::Cell)
+            .window(16)
+            .balance(balance.clone());
+        run_threaded(
+            scene.model(),
+            scene.grid(),
+            scene.initial_bodies(),
+            &config,
+            threads,
+            steps,
+        )
+        .expect("threaded run")
+    };
+    println!(
+        "skewed, {objects} cubes, {steps} steps, {worlds} worlds on {threads} threads, \
+         balancing period {period}"
+    );
+    println!("run  balance  wall s  imbalance  rounds  cells moved  famines  busy s  hash");
+    let mut hash = None;
+    let mut walls = [Vec::new(), Vec::new()];
+    for r in 0..repeats {
+        for (k, balance) in [BalanceConfig::default(), on.clone()].iter().enumerate() {
+            let rep = run(balance);
+            let last = rep.frames.last().map(|f| f.hash).unwrap_or(0);
+            assert_eq!(
+                *hash.get_or_insert(last),
+                last,
+                "balancing changed the result"
+            );
+            let b = &rep.counters.balance;
+            println!(
+                "{r:>3}  {:>7}  {:>6.3}  {:>9.3}  {:>6}  {:>11}  {:>7}  {:>6.2}  {last:016x}",
+                if balance.enabled { "on" } else { "off" },
+                rep.wall_seconds,
+                b.imbalance,
+                b.rounds,
+                b.cells_moved,
+                b.famines,
+                rep.times.busy_seconds,
+            );
+            walls[k].push(rep.wall_seconds);
+        }
+    }
+    let off_m = median(&mut walls[0]);
+    let on_m = median(&mut walls[1]);
+    println!(
+        "median wall: off {off_m:.3} s, on {on_m:.3} s, speed-up with balancing {:.2}x",
+        off_m / on_m
+    );
+    let watched = run(&monitor);
+    let balanced = run(&on);
+    let dir = std::path::Path::new("target/balance");
+    std::fs::create_dir_all(dir).expect("target/balance");
+    let path = dir.join("imbalance.csv");
+    let mut f = std::fs::File::create(&path).expect("imbalance.csv");
+    writeln!(
+        f,
+        "step,imbalance_off,imbalance_on,cells_moved_on,famines_on"
+    )
+    .expect("write");
+    // The time T threads need at best for each period's measured per-world CPU seconds:
+    // the busiest world, or the total shared by T threads, whichever is longer.
+    let modelled = |rounds: &[soda::kernel::RoundRecord]| -> f64 {
+        let mut last = 0;
+        let mut total = 0.0;
+        for r in rounds {
+            let span = (r.step - last) as f64;
+            let max = r.loads.iter().copied().fold(0.0, f64::max);
+            let sum: f64 = r.loads.iter().sum();
+            total += span * max.max(sum / threads as f64);
+            last = r.step;
+        }
+        total
+    };
+    let (m_off, m_on) = (modelled(&watched.balance), modelled(&balanced.balance));
+    let cpu = |rounds: &[soda::kernel::RoundRecord]| -> f64 {
+        let mut last = 0;
+        let mut total = 0.0;
+        for r in rounds {
+            total += (r.step - last) as f64 * r.loads.iter().sum::<f64>();
+            last = r.step;
+        }
+        total
+    };
+    println!(
+        "CPU seconds of the worlds' actions, steps 1..={}: off {:.3} s, on {:.3} s",
+        watched.balance.last().map_or(0, |r| r.step),
+        cpu(&watched.balance),
+        cpu(&balanced.balance)
+    );
+    println!(
+        "modelled {threads}-thread time of steps 1..={} from per-world CPU seconds: off {m_off:.3} s, \
+         on {m_on:.3} s, speed-up {:.2}x (wall: monitor-off {:.3} s, on {:.3} s)",
+        watched.balance.last().map_or(0, |r| r.step),
+        m_off / m_on.max(1e-12),
+        watched.wall_seconds,
+        balanced.wall_seconds
+    );
+    println!("step  imbalance off  imbalance on  cells moved  famines");
+    for (a, b) in watched.balance.iter().zip(&balanced.balance) {
+        writeln!(
+            f,
+            "{},{:.4},{:.4},{},{}",
+            a.step, a.imbalance, b.imbalance, b.cells_moved, b.famines
+        )
+        .expect("write");
+        println!(
+            "{:>4}  {:>13.3}  {:>12.3}  {:>11}  {:>7}",
+            a.step, a.imbalance, b.imbalance, b.cells_moved, b.famines
+        );
+    }
+    println!("wrote {}", path.display());
+}

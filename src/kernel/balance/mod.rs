@@ -1,0 +1,305 @@
+//! Dynamic load balancing by cell cession (thesis §3.3; SPEC.md §K13).
+//!
+//! Pure and deterministic: a [`Balancer`] is handed, at a step every world has committed,
+//! each world's load over the last period and the body count of every cell, and returns the
+//! new owner map. It reads no clock: executors measure (or, to replay exactly, count) the
+//! loads. Committed results never depend on its decisions, because a cell only changes owner
+//! where its state is final and any partition computes the same bits (the locality
+//! contract).
+//!
+//! A round: smooth the loads (exponential), classify each world (underloaded, normal, high,
+//! overloaded against the mean), let every high or overloaded world give cells to
+//! less-loaded face neighbours (cells chosen by the thesis's criteria), then let every
+//! world still underloaded and unable to get work from its neighbours fight famine: hand its
+//! territory to its neighbours and take a connected part of the most loaded world's.
+
+mod plan;
+pub mod territory;
+
+use super::config::{BalanceConfig, LoadSource};
+use super::counters::BalanceCounters;
+use super::partition::{Partition, WorldId};
+use crate::grid::Grid;
+use crate::model::Step;
+use plan::Plan;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+/// A world's load level against the mean (thesis §3.3.1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LoadLevel {
+    /// Below `underloaded × mean`: asks its neighbours for cells.
+    Underloaded,
+    /// Between the thresholds.
+    Normal,
+    /// Above `high × mean`: gives cells to underloaded neighbours.
+    High,
+    /// Above `overloaded × mean`: gives cells to any less-loaded neighbour.
+    Overloaded,
+}
+
+/// What one balancing round saw and did.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RoundRecord {
+    /// The committed step at which the cells changed owner.
+    pub step: Step,
+    /// Each world's measured load per committed step over the period.
+    pub loads: Vec<f64>,
+    /// Max over mean of `loads` (1 when nothing was measured).
+    pub imbalance: f64,
+    /// Each world's mean advance over GVT (LVT − GVT after its actions) during the period:
+    /// the world holding GVT back has the smallest. Observed, not used in decisions.
+    pub leads: Vec<f64>,
+    /// Each world's bodies at the round's step, before cells moved.
+    pub bodies: Vec<u64>,
+    /// Each world's level from its smoothed load, before cells moved.
+    pub levels: Vec<LoadLevel>,
+    /// Cells that changed owner.
+    pub cells_moved: u64,
+    /// Worlds that fought famine.
+    pub famines: u64,
+    /// Which worlds fought famine, in the order they did.
+    pub famished: Vec<WorldId>,
+    /// The owner of every cell after the round (in memory only: not serialised).
+    #[serde(skip)]
+    pub owners: Vec<WorldId>,
+}
+
+/// The balancing state of a run: smoothed loads, per-cell cooldowns, history.
+#[derive(Clone, Debug)]
+pub struct Balancer {
+    config: BalanceConfig,
+    smoothed: Option<Vec<f64>>,
+    moved_round: Vec<u64>,
+    round: u64,
+    history: Vec<RoundRecord>,
+}
+
+/// `max / mean` of `loads` (1 if the mean is not positive).
+pub fn imbalance(loads: &[f64]) -> f64 {
+    let mean = loads.iter().sum::<f64>() / loads.len().max(1) as f64;
+    let max = loads.iter().copied().fold(0.0, f64::max);
+    if mean > 0.0 {
+        max / mean
+    } else {
+        1.0
+    }
+}
+
+impl Balancer {
+    /// A balancer over a grid of `cells` cells.
+    pub fn new(config: &BalanceConfig, cells: usize) -> Self {
+        Balancer {
+            config: config.clone(),
+            smoothed: None,
+            moved_round: vec![u64::MAX; cells],
+            round: 0,
+            history: Vec::new(),
+        }
+    }
+
+    /// Whether balancing is on.
+    pub fn enabled(&self) -> bool {
+        self.config.enabled
+    }
+
+    /// The next committed step at which a round happens after `step`.
+    pub fn next_round_after(&self, step: Step) -> Step {
+        if self.config.enabled {
+            (step / self.config.period + 1) * self.config.period
+        } else {
+            Step::MAX
+        }
+    }
+
+    /// Where loads come from.
+    pub fn load_source(&self) -> LoadSource {
+        self.config.load
+    }
+
+    /// The level of `load` against `mean`.
+    pub fn level(&self, load: f64, mean: f64) -> LoadLevel {
+        let c = &self.config;
+        if load > c.overloaded * mean {
+            LoadLevel::Overloaded
+        } else if load > c.high * mean {
+            LoadLevel::High
+        } else if load < c.underloaded * mean {
+            LoadLevel::Underloaded
+        } else {
+            LoadLevel::Normal
+        }
+    }
+
+    /// The rounds so far.
+    pub fn history(&self) -> &[RoundRecord] {
+        &self.history
+    }
+
+    /// Rounds, cells moved and famines so far, with `imbalance` (the executor's run-wide
+    /// max/mean of the worlds' summed loads, see [`imbalance`]).
+    pub fn counters(&self, imbalance: f64) -> BalanceCounters {
+        BalanceCounters {
+            rounds: self.history.len() as u64,
+            cells_moved: self.history.iter().map(|r| r.cells_moved).sum(),
+            famines: self.history.iter().map(|r| r.famines).sum(),
+            imbalance,
+        }
+    }
+
+    /// One round at committed step `step`: `measured` is each world's load per committed
+    /// step since the last round (ignored for [`LoadSource::Seeded`]), `leads` each world's
+    /// mean advance over GVT meanwhile (recorded only), `bodies` the body count of every
+    /// cell at `step`. Returns the new partition if a cell moved.
+    pub fn round(
+        &mut self,
+        grid: &Grid,
+        part: &Partition,
+        measured: &[f64],
+        leads: &[f64],
+        bodies: &[u32],
+        step: Step,
+    ) -> Option<Partition> {
+        let n = part.worlds();
+        let loads: Vec<f64> = match self.config.load {
+            LoadSource::Seeded(seed) => {
+                let mut rng = ChaCha8Rng::seed_from_u64(seed ^ self.round.wrapping_mul(0x9E37));
+                (0..n).map(|_| rng.random::<f64>().powi(3)).collect()
+            }
+            _ => measured.to_vec(),
+        };
+        let a = self.config.smoothing;
+        let est: Vec<f64> = match &self.smoothed {
+            Some(s) => s
+                .iter()
+                .zip(&loads)
+                .map(|(s, m)| a * m + (1.0 - a) * s)
+                .collect(),
+            None => loads.clone(),
+        };
+        let mean = est.iter().sum::<f64>() / n.max(1) as f64;
+        let levels = est.iter().map(|&l| self.level(l, mean)).collect();
+        let mut world_bodies = vec![0u64; n];
+        for (c, &b) in bodies.iter().enumerate() {
+            world_bodies[part.owner(c as u32) as usize] += b as u64;
+        }
+        let mut plan = Plan::new(self, grid, part, est, bodies);
+        if plan.mean > 0.0 {
+            plan.cede();
+            plan.fight_famine();
+        }
+        let Plan {
+            owner,
+            est,
+            famished,
+            ..
+        } = plan;
+        let mut moved = 0;
+        for (c, (&new, &old)) in owner.iter().zip(part.owners()).enumerate() {
+            if new != old {
+                self.moved_round[c] = self.round;
+                moved += 1;
+            }
+        }
+        self.smoothed = Some(est);
+        self.history.push(RoundRecord {
+            step,
+            imbalance: imbalance(&loads),
+            loads,
+            leads: leads.to_vec(),
+            bodies: world_bodies,
+            levels,
+            cells_moved: moved,
+            famines: famished.len() as u64,
+            famished,
+            owners: owner.clone(),
+        });
+        self.round += 1;
+        (moved > 0).then(|| Partition::from_owners(grid, n, owner))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Vec3;
+
+    /// 8×1×1 cells, two worlds of four cells each, one body per cell of world 0.
+    fn row() -> (Grid, Partition, Vec<u32>) {
+        let g = Grid::covering(Vec3::zeros(), Vec3::new(8.0, 1.0, 1.0), 1.0);
+        let p = Partition::blocks(&g, 2);
+        let bodies = (0..8).map(|c| (c < 4) as u32).collect();
+        (g, p, bodies)
+    }
+
+    #[test]
+    fn levels_follow_the_thresholds_against_the_mean() {
+        let b = Balancer::new(&BalanceConfig::on(), 1);
+        assert_eq!(b.level(0.5, 1.0), LoadLevel::Underloaded);
+        assert_eq!(b.level(1.0, 1.0), LoadLevel::Normal);
+        assert_eq!(b.level(1.3, 1.0), LoadLevel::High);
+        assert_eq!(b.level(2.0, 1.0), LoadLevel::Overloaded);
+    }
+
+    #[test]
+    fn an_overloaded_world_gives_its_border_cells_to_its_neighbour_without_overshooting() {
+        let (g, p, bodies) = row();
+        let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
+        let new = b
+            .round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 10)
+            .expect("cells move");
+        // The giver's cells next to the border go first, and the giver keeps at least as
+        // much load as the recipient gets.
+        assert_eq!(new.owners(), &[0, 0, 1, 1, 1, 1, 1, 1]);
+        let r = &b.history()[0];
+        assert_eq!((r.step, r.cells_moved, r.famines), (10, 2, 0));
+        assert_eq!(r.bodies, vec![4, 0]);
+        assert_eq!(
+            r.levels,
+            vec![LoadLevel::Overloaded, LoadLevel::Underloaded]
+        );
+        assert_eq!(r.imbalance, 2.0);
+    }
+
+    #[test]
+    fn balanced_loads_move_nothing_and_cooldown_holds_moved_cells() {
+        let (g, p, bodies) = row();
+        let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
+        assert!(b
+            .round(&g, &p, &[1.0, 1.1], &[0.0; 2], &bodies, 5)
+            .is_none());
+        let config = BalanceConfig {
+            cooldown: 5,
+            smoothing: 1.0,
+            ..BalanceConfig::on()
+        };
+        let mut b = Balancer::new(&config, g.cell_count());
+        let p1 = b
+            .round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 5)
+            .expect("cells move");
+        // World 1 now measures all the load, but the moved cells are cooling down.
+        let p2 = b.round(&g, &p1, &[0.0, 4.0], &[0.0; 2], &bodies, 10);
+        let moved_back = p2.is_some_and(|p2| p2.owner(3) == 0 || p2.owner(2) == 0);
+        assert!(!moved_back, "a cell bounced back during its cooldown");
+    }
+
+    #[test]
+    fn a_starving_world_far_from_the_load_hands_over_and_takes_part_of_it() {
+        let g = Grid::covering(Vec3::zeros(), Vec3::new(9.0, 1.0, 1.0), 1.0);
+        let p = Partition::blocks(&g, 3);
+        let bodies: Vec<u32> = (0..9).map(|c| (c < 3) as u32 * 2).collect();
+        let mut b = Balancer::new(&BalanceConfig::on(), g.cell_count());
+        let new = b
+            .round(&g, &p, &[3.0, 0.0, 0.0], &[0.0; 3], &bodies, 20)
+            .expect("moves");
+        let r = &b.history()[0];
+        assert!(r.famished.contains(&2), "world 2 starves: {r:?}");
+        assert!(
+            new.cells_of(2).iter().all(|&c| c < 3),
+            "world 2 now owns part of world 0's old, loaded territory: {:?}",
+            new.owners()
+        );
+    }
+}

@@ -1,0 +1,310 @@
+//! One balancing round's plan: the owner map being edited, the estimated loads and cell
+//! costs, and the two moves of thesis §3.3.5 — cession to neighbours and the fight against
+//! famine (SPEC.md §K13).
+
+use super::territory::{
+    border_distance, components, cut_change, face_neighbours, foreign_neighbours, neighbour_worlds,
+};
+use super::{Balancer, LoadLevel};
+use crate::grid::Grid;
+use crate::kernel::partition::{Partition, WorldId};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// One round's working state: the owner map being edited and the estimated loads.
+pub(super) struct Plan<'a> {
+    balancer: &'a Balancer,
+    grid: &'a Grid,
+    pub(super) owner: Vec<WorldId>,
+    pub(super) est: Vec<f64>,
+    cost: Vec<f64>,
+    tie: Vec<u32>,
+    world_tie: Vec<u32>,
+    pub(super) mean: f64,
+    pub(super) famished: Vec<WorldId>,
+}
+
+impl<'a> Plan<'a> {
+    pub(super) fn new(
+        balancer: &'a Balancer,
+        grid: &'a Grid,
+        part: &Partition,
+        est: Vec<f64>,
+        bodies: &[u32],
+    ) -> Self {
+        let owner = part.owners().to_vec();
+        let cells = owner.len();
+        let mut rng = ChaCha8Rng::seed_from_u64(
+            balancer.config.seed ^ balancer.round.wrapping_mul(0x2545_F491_4F6C_DD1D),
+        );
+        let tie: Vec<u32> = (0..cells).map(|_| rng.random()).collect();
+        let world_tie: Vec<u32> = (0..est.len()).map(|_| rng.random()).collect();
+        // A cell's computing cost: its bodies times the bodies around it (the pairs its
+        // broad phase checks), scaled so a world's cells sum to the world's load.
+        let weight: Vec<f64> = (0..cells)
+            .map(|c| {
+                let own = bodies[c] as f64;
+                let around: f64 = grid
+                    .neighbours(grid.coord(c))
+                    .map(|x| bodies[grid.index(x)] as f64)
+                    .sum();
+                own * (1.0 + around)
+            })
+            .collect();
+        let mut sum = vec![0.0; est.len()];
+        let mut count = vec![0usize; est.len()];
+        for c in 0..cells {
+            sum[owner[c] as usize] += weight[c];
+            count[owner[c] as usize] += 1;
+        }
+        let cost = (0..cells)
+            .map(|c| {
+                let w = owner[c] as usize;
+                if sum[w] > 0.0 {
+                    est[w] * weight[c] / sum[w]
+                } else {
+                    est[w] / count[w] as f64
+                }
+            })
+            .collect();
+        let mean = est.iter().sum::<f64>() / est.len().max(1) as f64;
+        Plan {
+            balancer,
+            grid,
+            owner,
+            est,
+            cost,
+            tie,
+            world_tie,
+            mean,
+            famished: Vec::new(),
+        }
+    }
+
+    fn level(&self, w: WorldId) -> LoadLevel {
+        self.balancer.level(self.est[w as usize], self.mean)
+    }
+
+    fn cooling(&self, c: u32) -> bool {
+        let r = self.balancer.moved_round[c as usize];
+        r != u64::MAX && self.balancer.round < r + self.balancer.config.cooldown
+    }
+
+    fn give(&mut self, c: u32, to: WorldId) {
+        let from = self.owner[c as usize];
+        self.est[from as usize] -= self.cost[c as usize];
+        self.est[to as usize] += self.cost[c as usize];
+        self.owner[c as usize] = to;
+    }
+
+    fn cells_of(&self, w: WorldId) -> usize {
+        self.owner.iter().filter(|&&o| o == w).count()
+    }
+
+    /// Moving `c` away from its owner keeps the owner's territory in as few pieces and
+    /// non-empty.
+    fn keeps_owner_whole(&self, c: u32) -> bool {
+        let w = self.owner[c as usize];
+        let before = components(self.grid, &self.owner, w, None);
+        self.cells_of(w) > 1 && components(self.grid, &self.owner, w, Some(c)) <= before.max(1)
+    }
+
+    /// Cession (§3.3.5): every high or overloaded world, most loaded first, gives cells to
+    /// its less-loaded face neighbours.
+    pub(super) fn cede(&mut self) {
+        let n = self.est.len() as WorldId;
+        let mut givers: Vec<WorldId> = (0..n)
+            .filter(|&w| self.level(w) >= LoadLevel::High)
+            .collect();
+        givers.sort_by(|&a, &b| {
+            self.est[b as usize]
+                .total_cmp(&self.est[a as usize])
+                .then(self.world_tie[a as usize].cmp(&self.world_tie[b as usize]))
+        });
+        for g in givers {
+            let level = self.level(g);
+            if level < LoadLevel::High {
+                continue;
+            }
+            let mut recipients: Vec<(usize, f64, usize, u32, WorldId)> =
+                neighbour_worlds(self.grid, &self.owner, g)
+                    .into_iter()
+                    .filter(|&r| {
+                        self.est[r as usize] < self.mean
+                            && (level == LoadLevel::Overloaded
+                                || self.level(r) == LoadLevel::Underloaded)
+                    })
+                    .map(|r| {
+                        (
+                            neighbour_worlds(self.grid, &self.owner, r).len(),
+                            self.est[r as usize],
+                            self.cells_of(r),
+                            self.world_tie[r as usize],
+                            r,
+                        )
+                    })
+                    .collect();
+            recipients.sort_by(|a, b| {
+                a.0.cmp(&b.0)
+                    .then(a.1.total_cmp(&b.1))
+                    .then(a.2.cmp(&b.2))
+                    .then(a.3.cmp(&b.3))
+            });
+            for &(.., r) in &recipients {
+                self.give_to(g, r);
+            }
+        }
+    }
+
+    /// Gives cells of `g` face-adjacent to `r`'s territory, best first, until `r` reaches
+    /// the mean, `g` falls to it, or `max_cells` moved.
+    fn give_to(&mut self, g: WorldId, r: WorldId) {
+        for _ in 0..self.balancer.config.max_cells {
+            let (eg, er) = (self.est[g as usize], self.est[r as usize]);
+            if eg - self.mean <= 0.0 || self.mean - er <= 0.0 {
+                return;
+            }
+            // Never so much that the recipient ends above the giver (no bouncing back).
+            let fits = (eg - er) / 2.0;
+            let mut candidates: Vec<(usize, i64, f64, i32, u32, u32)> = (0..self.owner.len()
+                as u32)
+                .filter(|&c| {
+                    self.owner[c as usize] == g
+                        && !self.cooling(c)
+                        && self.cost[c as usize] <= fits
+                        && face_neighbours(self.grid, c).any(|x| self.owner[x as usize] == r)
+                })
+                .map(|c| {
+                    (
+                        foreign_neighbours(self.grid, &self.owner, c),
+                        cut_change(self.grid, &self.owner, c, r),
+                        self.cost[c as usize],
+                        border_distance(self.grid, c),
+                        self.tie[c as usize],
+                        c,
+                    )
+                })
+                .collect();
+            // Most foreign neighbours, then the smallest perimeter of both territories, the
+            // most cost given, the nearest to the scene border, the seeded tie-break.
+            candidates.sort_by(|a, b| {
+                b.0.cmp(&a.0)
+                    .then(a.1.cmp(&b.1))
+                    .then(b.2.total_cmp(&a.2))
+                    .then(a.3.cmp(&b.3))
+                    .then(a.4.cmp(&b.4))
+            });
+            let Some(c) = candidates
+                .iter()
+                .map(|x| x.5)
+                .find(|&c| self.keeps_owner_whole(c))
+            else {
+                return;
+            };
+            self.give(c, r);
+        }
+    }
+
+    /// Famine (§3.3.5): every world still underloaded after cession, least loaded first,
+    /// hands its territory to its neighbours and takes a connected part of the most loaded
+    /// world's.
+    pub(super) fn fight_famine(&mut self) {
+        let n = self.est.len() as WorldId;
+        let mut hungry: Vec<WorldId> = (0..n)
+            .filter(|&w| self.level(w) == LoadLevel::Underloaded)
+            .collect();
+        hungry.sort_by(|&a, &b| {
+            self.est[a as usize]
+                .total_cmp(&self.est[b as usize])
+                .then(self.world_tie[a as usize].cmp(&self.world_tie[b as usize]))
+        });
+        for w in hungry {
+            if self.level(w) != LoadLevel::Underloaded {
+                continue;
+            }
+            let richest = (0..n).filter(|&m| m != w).max_by(|&a, &b| {
+                self.est[a as usize]
+                    .total_cmp(&self.est[b as usize])
+                    .then(b.cmp(&a))
+            });
+            let Some(m) = richest.filter(|&m| self.level(m) >= LoadLevel::High) else {
+                return;
+            };
+            let target = self.mean.min(self.est[m as usize] - self.mean);
+            if self.hand_over(w) {
+                self.take_part(w, m, target);
+                self.famished.push(w);
+            }
+        }
+    }
+
+    /// Gives every cell of `w` to a face-neighbouring world (the least loaded), in waves
+    /// from its border inwards. Returns false (and changes nothing) if `w` has no neighbour.
+    fn hand_over(&mut self, w: WorldId) -> bool {
+        let mine: Vec<u32> = (0..self.owner.len() as u32)
+            .filter(|&c| self.owner[c as usize] == w)
+            .collect();
+        if !mine.is_empty() && neighbour_worlds(self.grid, &self.owner, w).is_empty() {
+            return false;
+        }
+        loop {
+            let mut progress = false;
+            for &c in &mine {
+                if self.owner[c as usize] != w {
+                    continue;
+                }
+                let to = face_neighbours(self.grid, c)
+                    .map(|x| self.owner[x as usize])
+                    .filter(|&o| o != w)
+                    .min_by(|&a, &b| {
+                        self.est[a as usize]
+                            .total_cmp(&self.est[b as usize])
+                            .then(a.cmp(&b))
+                    });
+                if let Some(to) = to {
+                    self.give(c, to);
+                    progress = true;
+                }
+            }
+            if !progress {
+                return true;
+            }
+        }
+    }
+
+    /// `w` takes a face-connected region of `m`'s cells, costliest first, keeping `m` in
+    /// as few pieces, until it holds `target` of cost or `max_cells` cells.
+    fn take_part(&mut self, w: WorldId, m: WorldId, target: f64) {
+        let mut taken = 0.0;
+        let mut region: Vec<u32> = Vec::new();
+        while taken < target && region.len() < self.balancer.config.max_cells {
+            let mut candidates: Vec<(f64, i32, u32, u32)> = (0..self.owner.len() as u32)
+                .filter(|&c| {
+                    self.owner[c as usize] == m
+                        && !self.cooling(c)
+                        && (region.is_empty()
+                            || face_neighbours(self.grid, c).any(|x| self.owner[x as usize] == w))
+                })
+                .map(|c| {
+                    (
+                        self.cost[c as usize],
+                        border_distance(self.grid, c),
+                        self.tie[c as usize],
+                        c,
+                    )
+                })
+                .collect();
+            candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            let Some(c) = candidates
+                .iter()
+                .map(|x| x.3)
+                .find(|&c| self.keeps_owner_whole(c))
+            else {
+                return;
+            };
+            taken += self.cost[c as usize];
+            self.give(c, w);
+            region.push(c);
+        }
+    }
+}
