@@ -11,6 +11,9 @@
 //!
 //! Both ignore memory bandwidth, caches and messaging overhead: they are models, labelled as
 //! such wherever they are printed, and checked against a measured run at P = 2.
+//!
+//! [`WindowedRun`] models N worlds on fewer workers with ideal optimism and a window W (the
+//! `peak-resistance` experiment): what the window could absorb if worlds ran ahead.
 
 use crate::exec::reference::CellCost;
 use crate::grid::Grid;
@@ -89,6 +92,72 @@ pub fn predict(grid: &Grid, partition: &Partition, costs: &[CellCost], steps: u6
     }
 }
 
+/// A **model** of N worlds on `workers` workers with ideal optimism: every speculation is
+/// right (no rollback, no message cost), so a world's only constraints are its own previous
+/// step and the window — it may start step `s` once `s < G + window`, `G` being the fewest
+/// steps any world has finished (the GVT). A free worker takes the ready world with the
+/// smallest next step (laggards first, lowest id on ties). `per_step[t][w]` is world `w`'s
+/// cost of step `t`, s.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WindowedRun {
+    /// When the last step finished, s.
+    pub makespan: f64,
+    /// When each step was committed (every world finished it), s.
+    pub commit_times: Vec<f64>,
+}
+
+impl WindowedRun {
+    /// Simulates the schedule (see the type's doc).
+    pub fn simulate(per_step: &[Vec<f64>], workers: usize, window: u64) -> WindowedRun {
+        let steps = per_step.len();
+        let n = per_step.first().map_or(0, |s| s.len());
+        let window = window.max(1) as usize;
+        let mut done = vec![0usize; n];
+        let mut running: Vec<(f64, usize)> = Vec::new();
+        let mut now = 0.0f64;
+        let mut commit_times = Vec::with_capacity(steps);
+        loop {
+            let gvt = done.iter().copied().min().unwrap_or(steps);
+            while running.len() < workers.max(1) {
+                let ready = (0..n)
+                    .filter(|&w| !running.iter().any(|r| r.1 == w))
+                    .filter(|&w| done[w] < steps && done[w] < gvt + window)
+                    .min_by_key(|&w| (done[w], w));
+                let Some(w) = ready else { break };
+                running.push((now + per_step[done[w]][w], w));
+            }
+            let Some(k) = (0..running.len()).min_by(|&a, &b| {
+                let (x, y) = (running[a], running[b]);
+                x.0.total_cmp(&y.0).then(x.1.cmp(&y.1))
+            }) else {
+                break;
+            };
+            let (finish, w) = running.swap_remove(k);
+            now = finish;
+            done[w] += 1;
+            let committed = done.iter().copied().min().unwrap_or(0);
+            while commit_times.len() < committed {
+                commit_times.push(now);
+            }
+        }
+        WindowedRun {
+            makespan: now,
+            commit_times,
+        }
+    }
+
+    /// The largest time between two consecutive commits (the first from time 0), s.
+    pub fn worst_gap(&self) -> f64 {
+        let mut prev = 0.0;
+        let mut worst = 0.0f64;
+        for &t in &self.commit_times {
+            worst = worst.max(t - prev);
+            prev = t;
+        }
+        worst
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -121,6 +190,33 @@ mod tests {
                 "{pr:?}"
             );
             assert!((pr.dataflow_speedup() - p as f64).abs() < 1e-9, "{pr:?}");
+        }
+    }
+
+    #[test]
+    fn windowed_model_is_bulk_synchronous_at_window_1_and_per_world_sums_when_unbounded() {
+        // Two worlds whose heavy steps alternate: 3 then 1, 1 then 3, ...
+        let per_step: Vec<Vec<f64>> = (0..6)
+            .map(|t| {
+                if t % 2 == 0 {
+                    vec![3.0, 1.0]
+                } else {
+                    vec![1.0, 3.0]
+                }
+            })
+            .collect();
+        let lockstep = WindowedRun::simulate(&per_step, 2, 1);
+        assert_eq!(lockstep.makespan, 18.0, "Σ_t max_w = 6 × 3");
+        assert_eq!(lockstep.commit_times, vec![3.0, 6.0, 9.0, 12.0, 15.0, 18.0]);
+        assert_eq!(lockstep.worst_gap(), 3.0);
+        let free = WindowedRun::simulate(&per_step, 2, 64);
+        assert_eq!(
+            free.makespan, 12.0,
+            "max_w Σ_t = 12: each world on its own worker"
+        );
+        // One worker does all the work whatever the window.
+        for w in [1, 2, 64] {
+            assert_eq!(WindowedRun::simulate(&per_step, 1, w).makespan, 24.0);
         }
     }
 

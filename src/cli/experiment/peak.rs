@@ -7,13 +7,14 @@ use super::{charts, cores, f, scene, Row};
 use anyhow::{bail, Context, Result};
 use parry3d::query;
 use parry3d::shape::{Ball, Cuboid, Shape as ParryShape};
-use soda::exec::reference::ReferenceRun;
+use soda::exec::reference::{CellCost, ReferenceRun};
 use soda::frame::StatesWanted;
 use soda::grid::Grid;
 use soda::hash::hex;
 use soda::kernel::trace::RunTrace;
-use soda::kernel::KernelConfig;
+use soda::kernel::{KernelConfig, Partition, PartitionKind};
 use soda::physics::{Body, RigidBodyModel, Shape};
+use soda::scaling::WindowedRun;
 use soda::scene::Scene;
 use soda::sim::{run_scene, ExecutorKind, RunOptions};
 use soda::state::CellStates;
@@ -34,6 +35,8 @@ struct Profile {
     compute: Vec<f64>,
     /// Per step: whether a cube (the burst) touches anything.
     burst_touching: Vec<bool>,
+    /// Every cell computation's cost, for the model.
+    cells: Vec<CellCost>,
     /// Hash of the final state (16 hex digits).
     hash: String,
 }
@@ -129,6 +132,7 @@ fn profile(s: &Scene, steps: u64) -> Profile {
         collisions: Vec::new(),
         compute: Vec::new(),
         burst_touching: Vec::new(),
+        cells: Vec::new(),
         hash: String::new(),
     };
     for _ in 0..steps {
@@ -136,8 +140,9 @@ fn profile(s: &Scene, steps: u64) -> Profile {
         p.collisions.push(c);
         p.burst_touching.push(cube);
         let frame = run.advance();
-        p.compute
-            .push(run.take_costs().iter().map(|c| c.seconds).sum::<f64>());
+        let costs = run.take_costs();
+        p.compute.push(costs.iter().map(|c| c.seconds).sum::<f64>());
+        p.cells.extend(costs);
         p.hash = hex(frame.hash);
     }
     p
@@ -217,6 +222,33 @@ fn max_lead(trace: &RunTrace) -> u64 {
         })
         .max()
         .unwrap_or(0)
+}
+
+/// The model (`soda::scaling::WindowedRun`) of `worlds` blocks worlds on `workers` workers
+/// with ideal optimism, per window: (window, makespan s, worst commit gap s).
+fn model(
+    s: &Scene,
+    p: &Profile,
+    worlds: usize,
+    workers: usize,
+    windows: &[u64],
+) -> Vec<(u64, f64, f64)> {
+    let grid = s.grid();
+    let positions: Vec<[f32; 3]> = s.bodies.iter().map(|b| b.position).collect();
+    let part = Partition::build(&PartitionKind::Blocks, &grid, worlds, &positions, 0);
+    let mut per_step = vec![vec![0.0f64; worlds]; p.compute.len()];
+    let mut cells: Vec<&CellCost> = p.cells.iter().collect();
+    cells.sort_by_key(|c| (c.step, c.cell));
+    for c in cells {
+        per_step[c.step as usize][part.owner(c.cell) as usize] += c.seconds;
+    }
+    windows
+        .iter()
+        .map(|&w| {
+            let m = WindowedRun::simulate(&per_step, workers, w);
+            (w, m.makespan, m.worst_gap())
+        })
+        .collect()
 }
 
 /// The median of `v` (the mean of the middle two for an even count).
@@ -323,6 +355,32 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         }
     }
     bar.finish_and_clear();
+    let mut model_csv = String::from("worlds,workers,window,model_seconds,model_worst_gap_ms\n");
+    let (mut model_wall, mut model_gap) = (Vec::new(), Vec::new());
+    for &worlds in &world_counts {
+        let m = model(&s, &p, worlds, threads, windows);
+        for &(win, secs, gap) in &m {
+            model_csv.push_str(&format!(
+                "{worlds},{threads},{win},{},{}\n",
+                f(secs),
+                f(gap * 1e3)
+            ));
+        }
+        let label = format!("MODEL (ideal optimism), {worlds} worlds on {threads} workers");
+        let x = |w: u64| (w as f64).log2();
+        model_wall.push((
+            label.clone(),
+            m.iter().map(|e| (x(e.0), e.1)).collect::<Vec<_>>(),
+        ));
+        model_gap.push((
+            label,
+            m.iter().map(|e| (x(e.0), e.2 * 1e3)).collect::<Vec<_>>(),
+        ));
+    }
+    let model_path = svg.with_file_name("peak-resistance-model.csv");
+    std::fs::write(&model_path, model_csv)
+        .with_context(|| format!("cannot write {}", model_path.display()))?;
+    println!("wrote {}", model_path.display());
     let series = |values: &[Vec<Vec<f64>>], what: &str| -> Vec<(String, Vec<(f64, f64)>)> {
         world_counts
             .iter()
@@ -349,7 +407,7 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         svg,
         &title,
         ("log2 of the window W", "wall time (s)"),
-        &series(&wall, "wall time"),
+        &[series(&wall, "measured wall time"), model_wall].concat(),
     )?;
     let gap_chart = svg.with_file_name("peak-resistance-gaps.svg");
     charts::line_chart(
@@ -359,7 +417,7 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
             "log2 of the window W",
             "worst gap between committed frames (ms)",
         ),
-        &series(&gaps, "worst commit gap"),
+        &[series(&gaps, "measured worst commit gap"), model_gap].concat(),
     )?;
     println!("wrote {}", gap_chart.display());
     Ok(rows)
