@@ -404,11 +404,14 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
         let last_step = frames.last().map_or(0, |f| f.0.step);
         self.out.lock().pending.extend(frames);
-        drop(assembly);
+        // Still under the assembly lock, so `committed` only grows: a thread that finished
+        // earlier frames cannot overwrite a later step after the lock is released (the
+        // balancing epochs read it to decide whether the run is over).
         self.committed.store(last_step);
         if last_step >= self.target.load() {
             self.status.store(DONE);
         }
+        drop(assembly);
     }
 
     /// A GVT round from the published bounds, without stopping any world: a snapshot is
