@@ -83,6 +83,21 @@ pub trait CellModel: Send + Sync {
     /// Feeds every bit of the state that matters into the canonical hash.
     fn hash_state(state: &Self::State, hasher: &mut StateHash);
 
+    /// Whether two states are the same bits: equal, and equal in every hashed bit (so `0.0`
+    /// and `-0.0`, which compare equal, differ). The kernel's lazy cancellation, early
+    /// cut-off and delta ghosts call it for every compared entity; a model may answer it
+    /// faster than the default (equality, then both hashes); `true` must mean that neither
+    /// the hash nor any computation can tell the two apart.
+    fn same_bits(a: &Self::State, b: &Self::State) -> bool {
+        if a != b {
+            return false;
+        }
+        let (mut ha, mut hb) = (StateHash::new(), StateHash::new());
+        Self::hash_state(a, &mut ha);
+        Self::hash_state(b, &mut hb);
+        ha.finish() == hb.finish()
+    }
+
     /// The state's hashed fields as (name, value) pairs, in hash order, for divergence
     /// reports (the first field whose value differs is named). Values should show the exact
     /// bits. The default is the whole state as one field.

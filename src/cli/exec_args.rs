@@ -97,6 +97,11 @@ pub struct ExecutorArgs {
     /// Replay a schedule string (`v1:...`) printed by `soda verify` or a fuzz target.
     #[arg(long, value_name = "STRING")]
     pub schedule: Option<String>,
+    /// Threaded executor: steps a world may compute ahead of the slowest other world
+    /// before it lets laggards run first [default: 0, near lockstep]. Larger values let
+    /// worlds speculate past slower neighbours (up to the window) at the risk of rollbacks.
+    #[arg(long, value_name = "STEPS", value_parser = clap::value_parser!(u64).range(0..=1_000_000))]
+    pub lead: Option<u64>,
     /// Dynamic load balancing by cell cession [default: off]: every --balance-period steps,
     /// at a committed step, overloaded worlds give cells to their neighbours and starving
     /// worlds take part of the most loaded one's. Results are bit-identical either way.
@@ -194,6 +199,12 @@ impl ExecutorArgs {
         if self.threads.is_some() && executor != ExecutorKind::Threaded {
             bail!("--threads applies to the threaded executor only: add `--executor threaded`");
         }
+        if self.lead.is_some() && executor != ExecutorKind::Threaded {
+            bail!(
+                "--lead paces the threaded executor's worlds: add `--executor threaded` (the \
+                 virtual executor's pace is its schedule)"
+            );
+        }
         let schedule = match (&self.schedule, self.schedule_seed) {
             (Some(s), _) => parse_schedule(s).map_err(|e| {
                 anyhow::anyhow!("--schedule `{}` is not a schedule string: {e}", short(s))
@@ -211,6 +222,7 @@ impl ExecutorArgs {
             .partition(self.partition.map_or(PartitionKind::Blocks, Into::into))
             .partition_seed(self.partition_seed.unwrap_or(0))
             .schedule(schedule)
+            .lead(self.lead.unwrap_or(0))
             .record_schedule(false);
         kernel.planted_bug = self.planted_bug.map_or(PlantedBug::None, Into::into);
         kernel.balance = self.balance_config()?;

@@ -132,6 +132,9 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     /// round's (the worlds stop there so every state at it is final when cells move).
     target: F::Atomic,
     optimistic: bool,
+    /// How many steps a world may compute ahead of the slowest other world before it lets
+    /// laggards run first (optimistic modes; `KernelConfig::lead`).
+    lead: Step,
     wanted: StatesWanted,
     assembly: F::Mutex<Assembly<M::State>>,
     out: F::Mutex<Output<M::State>>,
@@ -200,10 +203,6 @@ impl<S> Default for Output<S> {
         }
     }
 }
-
-/// How many steps a world may compute ahead of the slowest other world before it lets
-/// laggards run first (optimistic modes).
-const LEAD: Step = 0;
 
 /// Consecutive idle pauses after which a thread checks, under the full cut, whether the run
 /// has stalled (a kernel bug) rather than waiting for ever.
@@ -329,7 +328,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     }
 
     /// Whether world `w` should let laggards run first: in the optimistic modes, a world
-    /// that would only compute forward while it is more than [`LEAD`] steps ahead of the
+    /// that would only compute forward while it is more than `lead` steps ahead of the
     /// slowest other world would compute with borders that are probably still to change.
     /// The slowest world is never postponed, so the run always progresses. Its flag stays
     /// set: the task goes back to the shared queue.
@@ -342,7 +341,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             .map(|v| self.published[v].load())
             .min()
             .unwrap_or(Step::MAX);
-        let postpone = world.lvt() + 1 > slowest.saturating_add(LEAD);
+        let postpone = world.lvt() + 1 > slowest.saturating_add(self.lead);
         if postpone {
             self.scheduled[w].store(1);
         }
@@ -656,6 +655,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         status: F::Atomic::new(if steps == 0 { DONE } else { RUNNING }),
         target: F::Atomic::new(epoch_end),
         optimistic: config.mode != crate::kernel::RollbackMode::Conservative,
+        lead: config.lead,
         wanted,
         assembly: F::Mutex::new(Assembly {
             partial: BTreeMap::new(),

@@ -144,6 +144,12 @@ pub struct KernelConfig {
     /// Dynamic load balancing (off by default).
     #[serde(default)]
     pub balance: BalanceConfig,
+    /// Threaded executor, optimistic modes: how many steps a world may compute ahead of the
+    /// slowest other world before it lets laggards run first (SPEC.md §K12). 0 runs the
+    /// worlds nearly in lockstep (few rollbacks); more lets a world speculate past a slower
+    /// neighbour, up to the window.
+    #[serde(default)]
+    pub lead: u64,
     /// A deliberate bug, for tests that prove the checks can fire.
     #[doc(hidden)]
     pub planted_bug: PlantedBug,
@@ -161,6 +167,7 @@ impl Default for KernelConfig {
             record_schedule: true,
             trace: false,
             balance: BalanceConfig::default(),
+            lead: 0,
             planted_bug: PlantedBug::None,
         }
     }
@@ -214,6 +221,12 @@ impl KernelConfig {
     /// Sets the load balancing configuration.
     pub fn balance(mut self, balance: BalanceConfig) -> Self {
         self.balance = balance;
+        self
+    }
+
+    /// Sets the threaded executor's laggard lead (see [`KernelConfig::lead`]).
+    pub fn lead(mut self, lead: u64) -> Self {
+        self.lead = lead;
         self
     }
 

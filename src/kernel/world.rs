@@ -25,7 +25,6 @@ use super::partition::{Partition, WorldId};
 use super::trace::WorldTrace;
 use crate::frame::{Event, EventKind};
 use crate::grid::Grid;
-use crate::hash::StateHash;
 use crate::model::{BodyId, CellModel, Neighbourhood, Step};
 use crate::state::CellStates;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -100,7 +99,10 @@ struct Slot<S> {
     states: Vec<Vec<S>>,
     outs: Vec<Option<Out<S>>>,
     known: Vec<bool>,
-    ghosts: BTreeMap<u32, Vec<S>>,
+    /// The view of each foreign neighbour cell at this step (K4: the effective ghost of the
+    /// step, else — optimistic modes — the view of the step before). Shared, not copied,
+    /// between the steps that inherit it.
+    ghosts: BTreeMap<u32, Arc<Vec<S>>>,
     ghost_known: BTreeSet<u32>,
     foreign_in: BTreeMap<(u32, u32), Vec<S>>,
     migrate_known: BTreeSet<u32>,
@@ -192,18 +194,16 @@ pub struct World<M: CellModel> {
     counters: WorldCounters,
     scratch: Vec<M::State>,
     record: Option<WorldTrace>,
+    /// The step the world started from (0, or its last reterritory): ghosts of this step
+    /// carry the whole state; later ones only changes (K4, delta ghosts).
+    origin: Step,
+    /// Ghosts to (re)evaluate at the end of the current action, as (step, own cell index).
+    ghost_due: BTreeSet<(Step, usize)>,
 }
 
-/// Whether two states are the same bits: equal and hashing equal (so `0.0` and `-0.0`, which
-/// compare equal, still differ).
+/// Whether two states are the same bits (`CellModel::same_bits`).
 fn same_state<M: CellModel>(a: &M::State, b: &M::State) -> bool {
-    if a != b {
-        return false;
-    }
-    let (mut ha, mut hb) = (StateHash::new(), StateHash::new());
-    M::hash_state(a, &mut ha);
-    M::hash_state(b, &mut hb);
-    ha.finish() == hb.finish()
+    M::same_bits(a, b)
 }
 
 /// The entities that differ between two id-sorted states of one cell: both versions of an
@@ -307,6 +307,8 @@ impl<M: CellModel> World<M> {
             counters: WorldCounters::default(),
             scratch: Vec::new(),
             record: None,
+            origin: step,
+            ghost_due: BTreeSet::new(),
         }
     }
 
@@ -512,6 +514,7 @@ impl<M: CellModel> World<M> {
             self.act_conservative(gvt, &mut out);
         } else {
             self.act_optimistic(gvt, &mut out);
+            self.flush_ghosts(&mut out);
         }
         if self.record.is_some() {
             let lvt = self.lvt();
@@ -527,7 +530,7 @@ impl<M: CellModel> World<M> {
 
     fn act_optimistic(&mut self, gvt: Step, out: &mut Vec<Message<M::State>>) {
         if !self.inbox.is_empty() {
-            self.drain_inbox(out);
+            self.drain_inbox();
         } else if !self.dirty.is_empty() {
             // Rollback and Propagate runs to the head in one action (thesis Algorithm 2), so
             // other worlds see the repaired outputs as early as possible.
@@ -613,9 +616,17 @@ impl<M: CellModel> World<M> {
         (t - self.base) as usize
     }
 
+    /// Creates the slots up to `t`. In the optimistic modes a new slot inherits the ghost
+    /// views of the step before (K4: no ghost means no change).
     fn ensure_slot(&mut self, t: Step) {
         while self.base + (self.slots.len() as Step) <= t {
-            self.slots.push_back(Slot::new(self.cells.len()));
+            let mut slot = Slot::new(self.cells.len());
+            if self.mode != RollbackMode::Conservative {
+                if let Some(last) = self.slots.back() {
+                    slot.ghosts = last.ghosts.clone();
+                }
+            }
+            self.slots.push_back(slot);
         }
     }
 
@@ -695,17 +706,17 @@ impl<M: CellModel> World<M> {
         a.len() == b.len() && a.iter().zip(b).all(|(x, y)| same_state::<M>(x, y))
     }
 
-    /// Sends (kind, step, cell) to `w` with `content`: in conservative mode always (an empty
-    /// content is a null message); otherwise lazily — nothing if the live version sent
-    /// before has the same content, else an anti-message for it (if any) and the new
-    /// version (if not empty).
+    /// Sends (kind, step, cell) to `w` with `content` (`None`: no message): in conservative
+    /// mode always (an empty content is a null message); otherwise lazily — nothing if the
+    /// live version sent before has the same content (or there is none and `content` is
+    /// `None`), else an anti-message for it (if any) and the new version (if any).
     fn send(
         &mut self,
         kind: MessageKind,
         step: Step,
         cell: u32,
         w: WorldId,
-        content: Vec<(u32, M::State)>,
+        content: Option<Vec<(u32, M::State)>>,
         out: &mut Vec<Message<M::State>>,
     ) {
         let conservative = self.mode == RollbackMode::Conservative;
@@ -715,8 +726,12 @@ impl<M: CellModel> World<M> {
             .get(&(kind, cell, w))
             .and_then(|s| s.live.as_ref());
         if !conservative {
-            let old: &[(u32, M::State)] = live.map_or(&[][..], |v| &v[..]);
-            if self.same_pairs(old, &content) {
+            let same = match (live, &content) {
+                (None, None) => true,
+                (Some(a), Some(b)) => self.same_pairs(a, b),
+                _ => false,
+            };
+            if same {
                 return;
             }
         }
@@ -737,15 +752,14 @@ impl<M: CellModel> World<M> {
             bodies,
             removes: Vec::new(),
         };
-        if let Some(old) = entry.live.take() {
-            let lone = old.is_empty() || content.is_empty();
-            let dropped = bug == PlantedBug::DropLoneAnti && lone;
+        if entry.live.take().is_some() {
+            let dropped = bug == PlantedBug::DropLoneAnti && content.is_none();
             if !conservative && !dropped {
                 out.push(msg(Sign::Anti, entry.seq, Vec::new()));
                 self.counters.anti_messages_sent += 1;
             }
         }
-        if conservative || !content.is_empty() {
+        if let Some(content) = content {
             entry.seq += 1;
             entry.live = Some(content.clone());
             if content.is_empty() {
@@ -762,16 +776,32 @@ impl<M: CellModel> World<M> {
     }
 
     /// (Re)sends the ghost of own cell `x` at step `t` to every world owning a neighbour.
+    /// Conservative mode: the whole state, always (possibly a null message). Optimistic
+    /// modes (K4, delta ghosts): at the origin step the state if not empty; later the state
+    /// only if it differs from the state at `t − 1` (an explicit empty ghost if the cell
+    /// emptied), else no ghost — and lazily, so a re-evaluation that changes nothing sends
+    /// nothing.
     fn send_ghost(&mut self, x: usize, t: Step, out: &mut Vec<Message<M::State>>) {
         if self.targets[x].is_empty() {
             return;
         }
         let cell = self.cells[x];
         let i = self.si(t);
-        let content: Vec<(u32, M::State)> = self.slots[i].states[x]
-            .iter()
-            .map(|b| (cell, b.clone()))
-            .collect();
+        let cur = &self.slots[i].states[x];
+        let changed = if self.mode == RollbackMode::Conservative {
+            true
+        } else if t == self.origin {
+            !cur.is_empty()
+        } else {
+            assert!(
+                i > 0,
+                "ghost of step {t} evaluated without the state of step {}",
+                t - 1
+            );
+            !Self::same_states(&self.slots[i - 1].states[x], cur)
+        };
+        let content: Option<Vec<(u32, M::State)>> =
+            changed.then(|| cur.iter().map(|b| (cell, b.clone())).collect());
         for k in 0..self.targets[x].len() {
             let w = self.targets[x][k];
             self.send(MessageKind::Ghost, t, cell, w, content.clone(), out);
@@ -792,6 +822,8 @@ impl<M: CellModel> World<M> {
                     .collect()
             })
             .unwrap_or_default();
+        let content =
+            (self.mode == RollbackMode::Conservative || !content.is_empty()).then_some(content);
         self.send(MessageKind::Migrate, s + 1, self.cells[x], w, content, out);
     }
 
@@ -886,15 +918,13 @@ impl<M: CellModel> World<M> {
     /// The state of own cell `d` at `t ≤ head` changed from `old`: re-send its ghost, and if
     /// step `t` was computed, dirty the cells reading it. Returns whether something became
     /// dirty.
-    fn on_state_change(
-        &mut self,
-        d: u32,
-        t: Step,
-        old: Vec<M::State>,
-        out: &mut Vec<Message<M::State>>,
-    ) -> bool {
+    fn on_state_change(&mut self, d: u32, t: Step, old: Vec<M::State>) -> bool {
         let x = self.part.local(d) as usize;
-        self.send_ghost(x, t, out);
+        self.ghost_due.insert((t, x));
+        if t < self.head {
+            // The ghost of `t + 1` says whether the state changed since `t`.
+            self.ghost_due.insert((t + 1, x));
+        }
         if t >= self.head {
             return false;
         }
@@ -903,12 +933,12 @@ impl<M: CellModel> World<M> {
         self.mark_dirty(t, cells)
     }
 
-    fn drain_inbox(&mut self, out: &mut Vec<Message<M::State>>) {
+    fn drain_inbox(&mut self) {
         let mut straggle: Option<(Step, bool)> = None;
         while let Some((_, msg)) = self.inbox.pop_first() {
             self.counters.messages_received += 1;
             let positive = !msg.is_anti();
-            if let Some(s) = self.apply(msg, out) {
+            if let Some(s) = self.apply(msg) {
                 straggle = Some(match straggle {
                     None => (s, positive),
                     Some((s0, p)) => (s0.min(s), p || positive),
@@ -941,14 +971,14 @@ impl<M: CellModel> World<M> {
 
     /// Applies one message (optimistic modes). Returns the step at which it made cells dirty,
     /// if it did.
-    fn apply(&mut self, msg: Message<M::State>, out: &mut Vec<Message<M::State>>) -> Option<Step> {
+    fn apply(&mut self, msg: Message<M::State>) -> Option<Step> {
         let step = msg.step;
         self.ensure_slot(step);
         let i = self.si(step);
         let src = msg.src_cell;
         let kind = msg.kind;
         if kind == MessageKind::Input {
-            return self.apply_input(msg, out);
+            return self.apply_input(msg);
         }
         let r = self.slots[i].recv.entry((kind, src)).or_default();
         let before = r.effective().map(|e| e.0);
@@ -978,28 +1008,25 @@ impl<M: CellModel> World<M> {
         if before == after {
             return None;
         }
+        if kind == MessageKind::Ghost {
+            // The view of `src` at `step`: the effective ghost, else the view of the step
+            // before (K4, delta ghosts).
+            let view = match r.effective() {
+                Some(e) if e.1.is_empty() => None,
+                Some(e) => Some(Arc::new(e.1.iter().map(|p| p.1.clone()).collect())),
+                None if i > 0 => self.slots[i - 1].ghosts.get(&src).cloned(),
+                None => None,
+            };
+            let dirtied = self.set_ghost_view(src, step, view);
+            if step < self.head && dirtied.is_none() {
+                self.counters.stragglers_absorbed += 1;
+            }
+            return dirtied;
+        }
         let new: Vec<(u32, M::State)> = r.effective().map(|e| e.1.clone()).unwrap_or_default();
         match kind {
             MessageKind::Input => unreachable!("inputs are applied by apply_input"),
-            MessageKind::Ghost => {
-                let slot = &mut self.slots[i];
-                let old = if new.is_empty() {
-                    slot.ghosts.remove(&src)
-                } else {
-                    slot.ghosts
-                        .insert(src, new.into_iter().map(|p| p.1).collect())
-                }
-                .unwrap_or_default();
-                if step < self.head {
-                    let current = self.slots[i].ghosts.get(&src).map_or(&[][..], |v| &v[..]);
-                    let cells = self.cells_reading(src, step, &old, current);
-                    if self.mark_dirty(step, cells) {
-                        return Some(step);
-                    }
-                    self.counters.stragglers_absorbed += 1;
-                }
-                None
-            }
+            MessageKind::Ghost => unreachable!("ghosts are applied above"),
             MessageKind::Migrate => {
                 let mut dsts: Vec<u32> = old_cells;
                 dsts.extend(new.iter().map(|p| p.0));
@@ -1026,7 +1053,7 @@ impl<M: CellModel> World<M> {
                 if step <= self.head {
                     for &d in &dsts {
                         if let Some(old) = self.rebuild_state(d, step) {
-                            dirtied |= self.on_state_change(d, step, old, out);
+                            dirtied |= self.on_state_change(d, step, old);
                         }
                     }
                     if step < self.head && !dirtied {
@@ -1038,13 +1065,64 @@ impl<M: CellModel> World<M> {
         }
     }
 
+    /// Sets the view of foreign cell `src` at `t` to `view` (`None`: empty) and carries it
+    /// forward to the later steps that inherit it (those without an effective ghost of their
+    /// own), stopping at the first step whose view does not change. At each computed step
+    /// (below the head) whose view changed, the own cells that read the change become dirty.
+    /// Returns the first step made dirty, if any.
+    fn set_ghost_view(
+        &mut self,
+        src: u32,
+        t: Step,
+        view: Option<Arc<Vec<M::State>>>,
+    ) -> Option<Step> {
+        let mut first = None;
+        let mut u = t;
+        while let Some(slot) = self.slots.get_mut((u - self.base) as usize) {
+            if u > t
+                && slot
+                    .recv
+                    .get(&(MessageKind::Ghost, src))
+                    .is_some_and(|r| r.effective().is_some())
+            {
+                break;
+            }
+            let old = match &view {
+                Some(v) => slot.ghosts.insert(src, v.clone()),
+                None => slot.ghosts.remove(&src),
+            };
+            let unchanged = match (&old, &view) {
+                (None, None) => true,
+                (Some(a), Some(b)) => Arc::ptr_eq(a, b) || Self::same_states(a, b),
+                _ => false,
+            };
+            if unchanged {
+                break;
+            }
+            if u < self.head {
+                let old: &[M::State] = old.as_ref().map_or(&[][..], |v| &v[..]);
+                let new: &[M::State] = view.as_ref().map_or(&[][..], |v| &v[..]);
+                let cells = self.cells_reading(src, u, old, new);
+                if self.mark_dirty(u, cells) {
+                    first.get_or_insert(u);
+                }
+            }
+            u += 1;
+        }
+        first
+    }
+
+    /// Sends the ghosts due (`ghost_due`) in (step, cell) order: at the end of an action, so a
+    /// state changed several times within it is sent once.
+    fn flush_ghosts(&mut self, out: &mut Vec<Message<M::State>>) {
+        for (t, x) in std::mem::take(&mut self.ghost_due) {
+            self.send_ghost(x, t, out);
+        }
+    }
+
     /// Applies an input (optimistic modes): stored in its step's slot; if that step's states
     /// exist, the own cells holding a removed entity or receiving an added one are rebuilt.
-    fn apply_input(
-        &mut self,
-        msg: Message<M::State>,
-        out: &mut Vec<Message<M::State>>,
-    ) -> Option<Step> {
+    fn apply_input(&mut self, msg: Message<M::State>) -> Option<Step> {
         let step = msg.step;
         assert!(step >= 1, "inputs apply to steps from 1 on");
         let i = self.si(step);
@@ -1068,7 +1146,7 @@ impl<M: CellModel> World<M> {
         if step <= self.head {
             for d in cells {
                 if let Some(old) = self.rebuild_state(d, step) {
-                    dirtied |= self.on_state_change(d, step, old, out);
+                    dirtied |= self.on_state_change(d, step, old);
                 }
             }
         }
@@ -1114,7 +1192,7 @@ impl<M: CellModel> World<M> {
         }
         for d in changed_dst {
             if let Some(old) = self.rebuild_state(d, s + 1) {
-                self.on_state_change(d, s + 1, old, out);
+                self.on_state_change(d, s + 1, old);
             }
         }
         for (x, w) in changed_mig {
@@ -1163,8 +1241,8 @@ impl<M: CellModel> World<M> {
             self.send_migrate(x, h, w, out);
         }
         for x in 0..self.cells.len() {
-            if !self.slots[i + 1].states[x].is_empty() {
-                self.send_ghost(x, h + 1, out);
+            if !self.targets[x].is_empty() {
+                self.ghost_due.insert((h + 1, x));
             }
         }
     }
@@ -1191,8 +1269,8 @@ impl<M: CellModel> World<M> {
                     let slot = &mut self.slots[i];
                     slot.ghost_known.insert(src);
                     if !msg.bodies.is_empty() {
-                        slot.ghosts
-                            .insert(src, msg.bodies.into_iter().map(|p| p.1).collect());
+                        let view = msg.bodies.into_iter().map(|p| p.1).collect();
+                        slot.ghosts.insert(src, Arc::new(view));
                     } else {
                         // An empty cell at `step` migrates nothing at `step + 1`.
                         self.ensure_slot(step + 1);

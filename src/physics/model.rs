@@ -344,6 +344,27 @@ impl CellModel for RigidBodyModel {
         h.u32(b.rest_steps);
     }
 
+    /// Bit equality of every field (a `Body` compares equal exactly when its fields do, and
+    /// every hashed field is an `f32`/`u32` compared here by its bits).
+    fn same_bits(a: &Body, b: &Body) -> bool {
+        let bits = |v: &Vec3| [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()];
+        let quat = |b: &Body| {
+            let q = b.rotation.quaternion();
+            [q.w.to_bits(), q.i.to_bits(), q.j.to_bits(), q.k.to_bits()]
+        };
+        a.id == b.id
+            && a.rest_steps == b.rest_steps
+            && bits(&a.position) == bits(&b.position)
+            && bits(&a.linvel) == bits(&b.linvel)
+            && bits(&a.angvel) == bits(&b.angvel)
+            && quat(a) == quat(b)
+            && a.inv_mass.to_bits() == b.inv_mass.to_bits()
+            && bits(&a.inv_inertia) == bits(&b.inv_inertia)
+            && a.friction.to_bits() == b.friction.to_bits()
+            && a.restitution.to_bits() == b.restitution.to_bits()
+            && a.shape == b.shape
+    }
+
     fn fields(b: &Body) -> Vec<(String, String)> {
         let q = b.rotation.quaternion();
         let named = [
