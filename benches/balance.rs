@@ -2,7 +2,7 @@
 //! (`BAL_OBJECTS` cubes, default 2000, all in one corner) for `BAL_STEPS` steps (default
 //! 200) with `BAL_WORLDS` worlds (default 8) on `BAL_THREADS` threads (default 2), `cell`
 //! mode, window 16, blocks partition. Runs off and on alternately `BAL_REPEATS` times
-//! (default 3) and prints each run's wall time, the medians and their ratio, the run-wide
+//! (default 3), with the threaded laggard lead `BAL_LEAD` (default 0), and prints each run's wall time, the medians and their ratio, the run-wide
 //! imbalance (max/mean busy seconds per world) and the balancing counters; every run's
 //! committed hashes must be identical.
 //!
@@ -52,6 +52,7 @@ fn main() {
     let threads = env("BAL_THREADS", 2, 2) as usize;
     let repeats = env("BAL_REPEATS", 3, 1);
     let period = env("BAL_PERIOD", 20, 10);
+    let lead = env("BAL_LEAD", 0, 0);
     let scene = builtin("skewed", Some(objects), 0).expect("built-in scene");
     let on = BalanceConfig {
         period,
@@ -67,6 +68,7 @@ fn main() {
         let config = KernelConfig::new(worlds)
             .mode(RollbackMode::Cell)
             .window(16)
+            .lead(lead)
             .balance(balance.clone());
         run_threaded(
             scene.model(),

@@ -524,6 +524,11 @@ fn kernel_flags_that_do_not_apply_to_the_executor_are_errors_naming_the_fix() {
         err.contains("--threads") && err.contains("--executor threaded"),
         "{err}"
     );
+    let err = fails(&with(&["--executor", "virtual", "--lead", "2"]));
+    assert!(
+        err.contains("--lead") && err.contains("--executor threaded"),
+        "{err}"
+    );
     let err = fails(&with(&["--executor", "virtual", "--schedule", "nonsense"]));
     assert!(err.contains("--schedule") && err.contains("v1:"), "{err}");
     let o = soda(&with(&["--executor", "virtual", "--window", "0"]));

@@ -30,6 +30,13 @@ impl<T: Send> FacadeMutex<T> for Mutex<T> {
     fn lock(&self) -> Self::Guard<'_> {
         self.0.lock().unwrap_or_else(|e| e.into_inner())
     }
+    fn try_lock(&self) -> Option<Self::Guard<'_>> {
+        match self.0.try_lock() {
+            Ok(g) => Some(g),
+            Err(std::sync::TryLockError::Poisoned(e)) => Some(e.into_inner()),
+            Err(std::sync::TryLockError::WouldBlock) => None,
+        }
+    }
 }
 
 struct Atomic(shuttle::sync::atomic::AtomicU64);

@@ -16,6 +16,8 @@ pub trait FacadeMutex<T>: Send + Sync {
     fn new(v: T) -> Self;
     /// Locks, ignoring poisoning (a panicking world ends the run anyway).
     fn lock(&self) -> Self::Guard<'_>;
+    /// Locks if the lock is free now (ignoring poisoning); `None` if another thread holds it.
+    fn try_lock(&self) -> Option<Self::Guard<'_>>;
 }
 
 /// An atomic `u64` (all operations sequentially consistent).
@@ -62,6 +64,13 @@ impl<T: Send> FacadeMutex<T> for std::sync::Mutex<T> {
     }
     fn lock(&self) -> Self::Guard<'_> {
         std::sync::Mutex::lock(self).unwrap_or_else(|e| e.into_inner())
+    }
+    fn try_lock(&self) -> Option<Self::Guard<'_>> {
+        match std::sync::Mutex::try_lock(self) {
+            Ok(g) => Some(g),
+            Err(std::sync::TryLockError::Poisoned(e)) => Some(e.into_inner()),
+            Err(std::sync::TryLockError::WouldBlock) => None,
+        }
     }
 }
 

@@ -245,7 +245,15 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// assembly and fossil-collect, act if it wants to, route the output, publish its bound.
     /// Returns whether it acted.
     fn run_world(&self, w: usize, local: &Worker<usize>, times: &mut ThreadTimes) -> bool {
-        let mut slot = self.worlds[w].lock();
+        // A world another thread is running is not waited for: its task goes back to the
+        // shared queue with its flag still set (so the running thread does not queue a
+        // second copy), and this thread serves another world — e.g. its own, which may
+        // speculate ahead (`lead`) instead of blocking until the neighbour's step is done.
+        let Some(mut slot) = self.worlds[w].try_lock() else {
+            self.injector.push(w);
+            F::pause(0);
+            return false;
+        };
         self.scheduled[w].store(0);
         {
             let mut inbox = self.inboxes[w].lock();
@@ -329,16 +337,18 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
 
     /// Whether world `w` should let laggards run first: in the optimistic modes, a world
     /// that would only compute forward while it is more than `lead` steps ahead of the
-    /// slowest other world would compute with borders that are probably still to change.
-    /// The slowest world is never postponed, so the run always progresses. Its flag stays
-    /// set: the task goes back to the shared queue.
+    /// slowest of its neighbour worlds (those it exchanges ghosts with) would compute with
+    /// borders that are probably still to change. Worlds that are not neighbours do not hold
+    /// it back. The slowest world of the run is never postponed, so the run always
+    /// progresses. Its flag stays set: the task goes back to the shared queue.
     fn postpone(&self, w: usize, world: &World<M>) -> bool {
-        if !self.optimistic || !world.only_advances() || self.worlds.len() <= 1 {
+        if !self.optimistic || !world.only_advances() {
             return false;
         }
-        let slowest = (0..self.worlds.len())
-            .filter(|&v| v != w)
-            .map(|v| self.published[v].load())
+        let slowest = world
+            .neighbours()
+            .iter()
+            .map(|&v| self.published[v as usize].load())
             .min()
             .unwrap_or(Step::MAX);
         let postpone = world.lvt() + 1 > slowest.saturating_add(self.lead);

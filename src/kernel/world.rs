@@ -182,6 +182,9 @@ pub struct World<M: CellModel> {
     bug: PlantedBug,
     cells: Vec<u32>,
     targets: Vec<Vec<WorldId>>,
+    /// The other worlds owning a cell next to one of its own (ascending): the worlds it
+    /// exchanges ghosts with.
+    neighbours: Vec<WorldId>,
     base: Step,
     head: Step,
     end: Step,
@@ -266,7 +269,7 @@ impl<M: CellModel> World<M> {
         step: Step,
     ) -> Self {
         let cells = part.cells_of(id).to_vec();
-        let targets = cells
+        let targets: Vec<Vec<WorldId>> = cells
             .iter()
             .map(|&c| {
                 let mut t: Vec<WorldId> = grid
@@ -279,6 +282,9 @@ impl<M: CellModel> World<M> {
                 t
             })
             .collect();
+        let mut neighbours: Vec<WorldId> = targets.iter().flatten().copied().collect();
+        neighbours.sort_unstable();
+        neighbours.dedup();
         let mut slot = Slot::new(cells.len());
         for (x, &c) in cells.iter().enumerate() {
             slot.states[x] = states.cell_at(c as usize).to_vec();
@@ -295,6 +301,7 @@ impl<M: CellModel> World<M> {
             bug: config.planted_bug,
             cells,
             targets,
+            neighbours,
             base: step,
             head: step,
             end: step,
@@ -372,6 +379,12 @@ impl<M: CellModel> World<M> {
     /// The cells it owns (linear indices, ascending).
     pub fn cells(&self) -> &[u32] {
         &self.cells
+    }
+
+    /// The other worlds owning a cell next to one of its own (ascending): those it exchanges
+    /// ghosts with, so the only ones whose progress its own computations wait for.
+    pub fn neighbours(&self) -> &[WorldId] {
+        &self.neighbours
     }
 
     /// Its counters.
