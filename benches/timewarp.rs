@@ -20,12 +20,12 @@
 //! version. Every run checks its final hash against the reference.
 //!
 //! Run: `cargo bench --bench timewarp` (`TW_PARTS=overhead,granularity,memory,flatness`
-//! selects parts).
+//! selects parts; `TW_GHOSTS=full` runs every part with full instead of delta ghosts).
 
 use soda::exec::virtual_exec::VirtualRun;
 use soda::hash::hex;
 use soda::kernel::synthetic::Particles;
-use soda::kernel::{Counters, KernelConfig, RollbackMode, ScheduleSpec};
+use soda::kernel::{Counters, GhostPolicy, KernelConfig, RollbackMode, ScheduleSpec};
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 use soda::ReferenceRun;
@@ -66,11 +66,20 @@ fn virtual_run(scene: &Scene, cfg: &KernelConfig, steps: u64) -> (f64, u64, Coun
     (t.elapsed().as_secs_f64(), hash, r.counters())
 }
 
+/// The ghost policy (`TW_GHOSTS=delta|full`, default delta).
+fn ghosts() -> GhostPolicy {
+    match std::env::var("TW_GHOSTS").as_deref() {
+        Ok("full") => GhostPolicy::Full,
+        _ => GhostPolicy::Delta,
+    }
+}
+
 fn config(mode: RollbackMode, window: u64, schedule: ScheduleSpec) -> KernelConfig {
     KernelConfig::new(8)
         .mode(mode)
         .window(window)
         .schedule(schedule)
+        .ghosts(ghosts())
         .record_schedule(false)
 }
 

@@ -1,7 +1,8 @@
 //! Properties of the rollback modes and of the virtual executor's schedules, on built-in
 //! scenes: conservative never rolls back; cell recomputes fewer cell-steps than world on the
 //! same schedules of sparse-gas; the virtual executor reproduces the reference snapshots of
-//! every built-in scene; a printed schedule replays exactly; fuzz bytes drive the scheduler.
+//! every built-in scene; a printed schedule replays exactly; fuzz bytes drive the scheduler;
+//! delta ghosts make a resting border cost no message.
 
 mod kernel_support;
 
@@ -9,7 +10,7 @@ use kernel_support::{compare, reference};
 use soda::exec::virtual_exec::{parse_schedule, run_virtual, VirtualRun};
 use soda::hash::hex;
 use soda::kernel::synthetic::Particles;
-use soda::kernel::{KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::kernel::{GhostPolicy, KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
 use soda::scene::builtin::builtin;
 
 #[test]
@@ -199,4 +200,43 @@ fn fifo_schedule_applies_all_news_before_computing_so_never_rolls_back() {
         assert_eq!(c.total.rollbacks(), 0);
         assert_eq!(c.total.cells_recomputed, 0);
     }
+}
+
+#[test]
+fn delta_ghosts_send_nothing_for_a_resting_border_and_commit_the_same_bits() {
+    // 64 cubes land and fall asleep within ~2 s; over 5 s, full ghosts re-send every
+    // non-empty border cell every step, delta ghosts only the steps where a cell changed.
+    let s = builtin("falling-cubes", Some(64), 0).unwrap();
+    let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());
+    let steps = 300;
+    let exp = reference(&m, &g, &b, steps);
+    let mut ghosts = Vec::new();
+    for policy in [GhostPolicy::Full, GhostPolicy::Delta] {
+        for seed in 0..3 {
+            let cfg = KernelConfig::new(4)
+                .ghosts(policy)
+                .schedule(ScheduleSpec::Seeded(seed));
+            let c = compare(&m, &g, &b, &cfg, &exp)
+                .unwrap_or_else(|e| panic!("{policy:?} seed {seed}: {e}"));
+            ghosts.push((policy, c.total.ghosts_sent));
+        }
+    }
+    let sum = |p: GhostPolicy| -> u64 { ghosts.iter().filter(|g| g.0 == p).map(|g| g.1).sum() };
+    let (full, delta) = (sum(GhostPolicy::Full), sum(GhostPolicy::Delta));
+    assert!(
+        delta * 2 < full,
+        "delta ghosts {delta} not under half of full ghosts {full}"
+    );
+    // Once everything sleeps, a delta world sends no ghost at all.
+    let cfg = KernelConfig::new(4).schedule(ScheduleSpec::Fifo);
+    let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg);
+    run.run(240);
+    let before = run.counters().total.ghosts_sent;
+    let frames = run.run(60);
+    assert_eq!(frames.last(), exp.last());
+    assert_eq!(
+        run.counters().total.ghosts_sent,
+        before,
+        "ghosts sent while the pile sleeps"
+    );
 }

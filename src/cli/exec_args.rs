@@ -5,7 +5,7 @@ use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use soda::exec::virtual_exec::parse_schedule;
 use soda::kernel::{
-    BalanceConfig, KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
+    BalanceConfig, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
 };
 use soda::sim::{ExecutorKind, RunOptions};
 
@@ -37,6 +37,24 @@ impl From<ModeArg> for RollbackMode {
             ModeArg::Cell => RollbackMode::Cell,
             ModeArg::World => RollbackMode::World,
             ModeArg::Conservative => RollbackMode::Conservative,
+        }
+    }
+}
+
+/// `--ghosts` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum GhostsArg {
+    /// A ghost only when a border cell changed since the step before (no ghost: unchanged).
+    Delta,
+    /// A ghost of every non-empty border cell every step (no ghost: empty).
+    Full,
+}
+
+impl From<GhostsArg> for GhostPolicy {
+    fn from(g: GhostsArg) -> Self {
+        match g {
+            GhostsArg::Delta => GhostPolicy::Delta,
+            GhostsArg::Full => GhostPolicy::Full,
         }
     }
 }
@@ -97,6 +115,12 @@ pub struct ExecutorArgs {
     /// Replay a schedule string (`v1:...`) printed by `soda verify` or a fuzz target.
     #[arg(long, value_name = "STRING")]
     pub schedule: Option<String>,
+    /// Ghost policy of the optimistic modes [default: delta]: `delta` sends a border cell's
+    /// state only when it changed since the step before, so worlds running ahead predict
+    /// unchanged neighbours; `full` sends every non-empty border cell every step (absent
+    /// means empty). Virtual and threaded only; results are bit-identical either way.
+    #[arg(long, value_enum, value_name = "POLICY")]
+    pub ghosts: Option<GhostsArg>,
     /// Threaded executor: steps a world may compute ahead of the slowest other world
     /// before it lets laggards run first [default: 0, near lockstep]. Larger values let
     /// worlds speculate past slower neighbours (up to the window) at the risk of rollbacks.
@@ -162,6 +186,7 @@ impl ExecutorArgs {
             ("--worlds", self.worlds.is_some()),
             ("--mode", self.mode.is_some()),
             ("--window", self.window.is_some()),
+            ("--ghosts", self.ghosts.is_some()),
             ("--partition", self.partition.is_some()),
             ("--partition-seed", self.partition_seed.is_some()),
             ("--planted-bug", self.planted_bug.is_some()),
@@ -223,6 +248,7 @@ impl ExecutorArgs {
             .partition_seed(self.partition_seed.unwrap_or(0))
             .schedule(schedule)
             .lead(self.lead.unwrap_or(0))
+            .ghosts(self.ghosts.map_or(GhostPolicy::Delta, Into::into))
             .record_schedule(false);
         kernel.planted_bug = self.planted_bug.map_or(PlantedBug::None, Into::into);
         kernel.balance = self.balance_config()?;

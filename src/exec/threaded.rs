@@ -400,7 +400,8 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         // stage in step order whichever thread completes them.
         let mut frames = Vec::with_capacity(done.len());
         for (t, mut p) in done {
-            p.states.sort_by_key(|s| M::id(s));
+            // Ids are unique: an unstable sort gives the one id order.
+            p.states.sort_unstable_by_key(|s| M::id(s));
             p.events.sort();
             let frame = Frame {
                 step: t,

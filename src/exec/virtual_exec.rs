@@ -587,8 +587,15 @@ impl<M: CellModel> VirtualRun<M> {
     }
 
     fn frame(&self, t: Step) -> (Frame, Vec<&M::State>) {
-        let mut all: Vec<&M::State> = self.worlds.iter().flat_map(|w| w.state_at(t)).collect();
-        all.sort_by_key(|s| M::id(s));
+        // Sorted by id through (id, state) pairs: comparisons read the key in place.
+        let mut keyed: Vec<(u64, &M::State)> = self
+            .worlds
+            .iter()
+            .flat_map(|w| w.state_at(t))
+            .map(|s| (M::id(s), s))
+            .collect();
+        keyed.sort_unstable_by_key(|p| p.0);
+        let all: Vec<&M::State> = keyed.into_iter().map(|p| p.1).collect();
         let mut events: Vec<Event> = self
             .worlds
             .iter()

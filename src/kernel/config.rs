@@ -18,6 +18,22 @@ pub enum RollbackMode {
     Conservative,
 }
 
+/// What a ghost carries and what its absence means in the optimistic modes (SPEC.md §K4).
+/// Conservative mode always sends every ghost (null messages).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum GhostPolicy {
+    /// A ghost only when a border cell's state differs from the step before; no ghost means
+    /// unchanged, so a world running ahead predicts resting neighbours exactly and a resting
+    /// border costs no message.
+    #[default]
+    Delta,
+    /// A ghost of every non-empty border cell at every step; no ghost means empty, so a world
+    /// running ahead predicts empty neighbours (classic; every late ghost of a step is a
+    /// straggler of that step only).
+    Full,
+}
+
 impl RollbackMode {
     /// Parses `cell`, `world` or `conservative`.
     pub fn parse(s: &str) -> Option<Self> {
@@ -150,6 +166,9 @@ pub struct KernelConfig {
     /// neighbour, up to the window.
     #[serde(default)]
     pub lead: u64,
+    /// Ghost policy of the optimistic modes.
+    #[serde(default)]
+    pub ghosts: GhostPolicy,
     /// A deliberate bug, for tests that prove the checks can fire.
     #[doc(hidden)]
     pub planted_bug: PlantedBug,
@@ -168,6 +187,7 @@ impl Default for KernelConfig {
             trace: false,
             balance: BalanceConfig::default(),
             lead: 0,
+            ghosts: GhostPolicy::Delta,
             planted_bug: PlantedBug::None,
         }
     }
@@ -221,6 +241,12 @@ impl KernelConfig {
     /// Sets the load balancing configuration.
     pub fn balance(mut self, balance: BalanceConfig) -> Self {
         self.balance = balance;
+        self
+    }
+
+    /// Sets the ghost policy of the optimistic modes.
+    pub fn ghosts(mut self, ghosts: GhostPolicy) -> Self {
+        self.ghosts = ghosts;
         self
     }
 

@@ -29,7 +29,8 @@ pub mod world;
 
 pub use balance::{Balancer, LoadLevel, RoundRecord};
 pub use config::{
-    BalanceConfig, KernelConfig, LoadSource, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
+    BalanceConfig, GhostPolicy, KernelConfig, LoadSource, PartitionKind, PlantedBug, RollbackMode,
+    ScheduleSpec,
 };
 pub use counters::{BalanceCounters, Counters, WorldCounters};
 pub use message::{Input, Message, MessageKey, MessageKind, Sign};

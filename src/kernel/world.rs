@@ -18,7 +18,7 @@
 //! `t` — that is a rollback. Re-executing a dirty cell compares the new output with the log;
 //! only a different output changes states at `t + 1` (early cut-off) and re-sends migrations.
 
-use super::config::{KernelConfig, PlantedBug, RollbackMode};
+use super::config::{GhostPolicy, KernelConfig, PlantedBug, RollbackMode};
 use super::counters::WorldCounters;
 use super::message::{Message, MessageKey, MessageKind, Sign};
 use super::partition::{Partition, WorldId};
@@ -180,6 +180,10 @@ pub struct World<M: CellModel> {
     mode: RollbackMode,
     window: Step,
     bug: PlantedBug,
+    ghosts: GhostPolicy,
+    /// Whether ghosts are deltas (optimistic modes with [`GhostPolicy::Delta`]): no ghost
+    /// means unchanged, views are inherited from the step before.
+    delta: bool,
     cells: Vec<u32>,
     targets: Vec<Vec<WorldId>>,
     /// The other worlds owning a cell next to one of its own (ascending): the worlds it
@@ -299,6 +303,8 @@ impl<M: CellModel> World<M> {
             mode: config.mode,
             window: config.window.max(1),
             bug: config.planted_bug,
+            ghosts: config.ghosts,
+            delta: config.mode != RollbackMode::Conservative && config.ghosts == GhostPolicy::Delta,
             cells,
             targets,
             neighbours,
@@ -333,6 +339,7 @@ impl<M: CellModel> World<M> {
             mode: self.mode,
             window: self.window,
             planted_bug: self.bug,
+            ghosts: self.ghosts,
             ..KernelConfig::default()
         };
         let mut fresh = Self::at_step(
@@ -634,7 +641,7 @@ impl<M: CellModel> World<M> {
     fn ensure_slot(&mut self, t: Step) {
         while self.base + (self.slots.len() as Step) <= t {
             let mut slot = Slot::new(self.cells.len());
-            if self.mode != RollbackMode::Conservative {
+            if self.delta {
                 if let Some(last) = self.slots.back() {
                     slot.ghosts = last.ghosts.clone();
                 }
@@ -803,7 +810,7 @@ impl<M: CellModel> World<M> {
         let cur = &self.slots[i].states[x];
         let changed = if self.mode == RollbackMode::Conservative {
             true
-        } else if t == self.origin {
+        } else if !self.delta || t == self.origin {
             !cur.is_empty()
         } else {
             assert!(
@@ -934,7 +941,7 @@ impl<M: CellModel> World<M> {
     fn on_state_change(&mut self, d: u32, t: Step, old: Vec<M::State>) -> bool {
         let x = self.part.local(d) as usize;
         self.ghost_due.insert((t, x));
-        if t < self.head {
+        if t < self.head && self.delta {
             // The ghost of `t + 1` says whether the state changed since `t`.
             self.ghost_due.insert((t + 1, x));
         }
@@ -1027,7 +1034,7 @@ impl<M: CellModel> World<M> {
             let view = match r.effective() {
                 Some(e) if e.1.is_empty() => None,
                 Some(e) => Some(Arc::new(e.1.iter().map(|p| p.1.clone()).collect())),
-                None if i > 0 => self.slots[i - 1].ghosts.get(&src).cloned(),
+                None if i > 0 && self.delta => self.slots[i - 1].ghosts.get(&src).cloned(),
                 None => None,
             };
             let dirtied = self.set_ghost_view(src, step, view);
@@ -1092,6 +1099,9 @@ impl<M: CellModel> World<M> {
         let mut first = None;
         let mut u = t;
         while let Some(slot) = self.slots.get_mut((u - self.base) as usize) {
+            if u > t && !self.delta {
+                break;
+            }
             if u > t
                 && slot
                     .recv
@@ -1219,43 +1229,74 @@ impl<M: CellModel> World<M> {
         self.ensure_slot(h + 1);
         self.counters.steps_computed += 1;
         let i = self.si(h);
-        let mut dsts: BTreeSet<u32> = BTreeSet::new();
+        let n = self.cells.len();
+        // The states at h + 1 are gathered by scattering the outputs (one pass over the
+        // bodies) rather than rebuilt cell by cell from 27 neighbours' outputs; the cells
+        // that also receive early migrations, or any cell when inputs apply at h + 1, take the
+        // general rule
+        // (`rebuild_state`). Either way a state is the id-sorted union (K1).
+        let mut fresh: Vec<Vec<M::State>> = (0..n).map(|_| Vec::new()).collect();
+        let mut landed = vec![false; n];
         let mut migs: BTreeSet<(usize, WorldId)> = BTreeSet::new();
-        for x in 0..self.cells.len() {
+        for x in 0..n {
             let o = if self.slots[i].states[x].is_empty() {
                 Out::empty()
             } else {
                 self.compute(x, h)
             };
-            for (d, _) in &o.bodies {
+            for (d, b) in &o.bodies {
                 if self.is_own(*d) {
-                    dsts.insert(*d);
+                    let ld = self.part.local(*d) as usize;
+                    fresh[ld].push(b.clone());
+                    landed[ld] = true;
                 } else {
                     migs.insert((x, self.part.owner(*d)));
                 }
             }
             self.slots[i].outs[x] = Some(o);
         }
-        dsts.extend(self.slots[i + 1].foreign_in.keys().map(|k| k.0));
         let part = &*self.part;
         let id = self.id;
-        dsts.extend(
-            self.slots[i + 1]
-                .inputs
-                .values()
-                .flat_map(|x| x.1.iter().map(|p| p.0))
-                .filter(|&c| part.owner(c) == id),
-        );
-        for d in dsts {
+        let next = &self.slots[i + 1];
+        let general: BTreeSet<u32> = next
+            .foreign_in
+            .keys()
+            .map(|k| k.0)
+            .chain(
+                next.inputs
+                    .values()
+                    .flat_map(|x| x.1.iter().map(|p| p.0))
+                    .filter(|&c| part.owner(c) == id),
+            )
+            .collect();
+        // Inputs at h + 1 (rare) may remove ids from any cell: every cell takes the general
+        // rule then.
+        let inputs = !next.inputs.is_empty();
+        let mut general = general;
+        for (ld, mut v) in fresh.into_iter().enumerate() {
+            if !landed[ld] {
+                continue;
+            }
+            if inputs || general.contains(&self.cells[ld]) {
+                general.insert(self.cells[ld]);
+                continue;
+            }
+            if !v.is_sorted_by_key(|b| M::id(b)) {
+                v.sort_by_key(|b| M::id(b));
+            }
+            debug_assert!(self.slots[i + 1].states[ld].is_empty());
+            self.slots[i + 1].states[ld] = v;
+        }
+        for d in general {
             self.rebuild_state(d, h + 1);
         }
         self.head = h + 1;
         for (x, w) in migs {
             self.send_migrate(x, h, w, out);
         }
-        for x in 0..self.cells.len() {
+        for x in 0..n {
             if !self.targets[x].is_empty() {
-                self.ghost_due.insert((h + 1, x));
+                self.send_ghost(x, h + 1, out);
             }
         }
     }

@@ -5,7 +5,9 @@
 use proptest::prelude::*;
 use soda::exec::virtual_exec::VirtualRun;
 use soda::kernel::synthetic::{Particle, Particles};
-use soda::kernel::{Counters, KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
+use soda::kernel::{
+    Counters, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
+};
 use soda::scene::builtin::builtin;
 use soda::{Body, CellModel, Frame, Grid, ReferenceRun, RigidBodyModel};
 
@@ -79,6 +81,7 @@ pub struct Case {
     pub partition: PartitionKind,
     pub partition_seed: u64,
     pub schedule_seed: u64,
+    pub ghosts: GhostPolicy,
 }
 
 impl Case {
@@ -88,7 +91,8 @@ impl Case {
             .window(self.window)
             .partition(self.partition.clone())
             .partition_seed(self.partition_seed)
-            .schedule(ScheduleSpec::Seeded(self.schedule_seed));
+            .schedule(ScheduleSpec::Seeded(self.schedule_seed))
+            .ghosts(self.ghosts);
         c.planted_bug = bug;
         c
     }
@@ -150,9 +154,10 @@ pub fn case(
         partition(),
         any::<u64>(),
         any::<u64>(),
+        prop_oneof![Just(GhostPolicy::Delta), Just(GhostPolicy::Full)],
     )
         .prop_map(
-            |(scene, steps, worlds, mode, window, partition, partition_seed, schedule_seed)| Case {
+            |(
                 scene,
                 steps,
                 worlds,
@@ -161,6 +166,17 @@ pub fn case(
                 partition,
                 partition_seed,
                 schedule_seed,
+                ghosts,
+            )| Case {
+                scene,
+                steps,
+                worlds,
+                mode,
+                window,
+                partition,
+                partition_seed,
+                schedule_seed,
+                ghosts,
             },
         )
 }
