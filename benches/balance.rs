@@ -2,7 +2,8 @@
 //! (`BAL_OBJECTS` cubes, default 2000, all in one corner) for `BAL_STEPS` steps (default
 //! 200) with `BAL_WORLDS` worlds (default 8) on `BAL_THREADS` threads (default 2), `cell`
 //! mode, window 16, blocks partition. Runs off and on alternately `BAL_REPEATS` times
-//! (default 3), with the threaded laggard lead `BAL_LEAD` (default 0), and prints each run's wall time, the medians and their ratio, the run-wide
+//! (default 3), with the threaded laggard lead `BAL_LEAD` (default 0) and ghost policy `BAL_GHOSTS`
+//! (delta or full, default delta), and prints each run's wall time, the medians and their ratio, the run-wide
 //! imbalance (max/mean busy seconds per world) and the balancing counters; every run's
 //! committed hashes must be identical.
 //!
@@ -16,7 +17,7 @@
 //! `cargo test --benches`) runs a tiny version.
 
 use soda::exec::threaded::{run_threaded, ThreadedReport};
-use soda::kernel::{BalanceConfig, KernelConfig, RollbackMode};
+use soda::kernel::{BalanceConfig, GhostPolicy, KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
 use std::io::Write;
 
@@ -53,6 +54,10 @@ fn main() {
     let repeats = env("BAL_REPEATS", 3, 1);
     let period = env("BAL_PERIOD", 20, 10);
     let lead = env("BAL_LEAD", 0, 0);
+    let ghosts = match std::env::var("BAL_GHOSTS").as_deref() {
+        Ok("full") => GhostPolicy::Full,
+        _ => GhostPolicy::Delta,
+    };
     let scene = builtin("skewed", Some(objects), 0).expect("built-in scene");
     let on = BalanceConfig {
         period,
@@ -69,6 +74,7 @@ fn main() {
             .mode(RollbackMode::Cell)
             .window(16)
             .lead(lead)
+            .ghosts(ghosts)
             .balance(balance.clone());
         run_threaded(
             scene.model(),
