@@ -782,7 +782,9 @@ impl<M: CellModel> World<M> {
         if let Some(content) = content {
             entry.seq += 1;
             entry.live = Some(content.clone());
-            if content.is_empty() {
+            // Null messages are conservative mode's; an empty delta ghost (a border cell that
+            // emptied) is news, counted as a ghost only.
+            if conservative && content.is_empty() {
                 self.counters.null_messages_sent += 1;
             }
             out.push(msg(Sign::Positive, entry.seq, content));
