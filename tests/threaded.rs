@@ -194,9 +194,17 @@ fn threaded_runs_with_balancing_on_match_the_reference_bitwise() {
                     RollbackMode::World,
                     RollbackMode::Conservative,
                 ][(k + threads) % 3];
+                // Seeded (random) loads are shared between all 8 worlds so they force moves;
+                // the others share between the threads (the threaded default).
+                let workers = if matches!(load, LoadSource::Seeded(_)) {
+                    8
+                } else {
+                    0
+                };
                 let balance = BalanceConfig {
                     period: 3 + k as u64 * 4,
                     load,
+                    workers,
                     ..BalanceConfig::on()
                 };
                 let config = KernelConfig::new(8).mode(mode).window(8).balance(balance);

@@ -146,6 +146,11 @@ pub struct ExecutorArgs {
     /// Rounds during which a cell that moved stays put [default: 2].
     #[arg(long, value_name = "R")]
     pub balance_cooldown: Option<u64>,
+    /// Workers the load is shared between [default: the thread count for `threaded`, the
+    /// world count for `virtual`]: load levels are taken against total / workers, so with
+    /// fewer threads than worlds the load gathers in as many territories as threads.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub balance_workers: Option<u64>,
     /// A deliberate kernel bug, to prove the checks can fire (never for real runs).
     #[arg(long, value_enum, hide = true)]
     pub planted_bug: Option<PlantedBugArg>,
@@ -195,6 +200,7 @@ impl ExecutorArgs {
             ("--balance-thresholds", self.balance_thresholds.is_some()),
             ("--balance-smoothing", self.balance_smoothing.is_some()),
             ("--balance-cooldown", self.balance_cooldown.is_some()),
+            ("--balance-workers", self.balance_workers.is_some()),
         ];
         let virtual_flags = [
             ("--schedule-seed", self.schedule_seed.is_some()),
@@ -270,7 +276,8 @@ impl ExecutorArgs {
         let tuning = self.balance_period.is_some()
             || self.balance_thresholds.is_some()
             || self.balance_smoothing.is_some()
-            || self.balance_cooldown.is_some();
+            || self.balance_cooldown.is_some()
+            || self.balance_workers.is_some();
         if tuning && !b.enabled {
             bail!("the --balance-* options tune load balancing, which is off: add `--balance on`");
         }
@@ -304,6 +311,9 @@ impl ExecutorArgs {
         }
         if let Some(c) = self.balance_cooldown {
             b.cooldown = c;
+        }
+        if let Some(w) = self.balance_workers {
+            b.workers = w as usize;
         }
         b.validate()
             .map_err(|e| anyhow::anyhow!("--balance options: {e}"))?;

@@ -184,10 +184,11 @@ struct Partial<S> {
     events: Vec<Event>,
 }
 
-/// Committed frames waiting for the output stage (the calling thread), with the states the
-/// sink asked for.
+/// Committed steps waiting for the output stage (the calling thread), whole (every world
+/// contributed) but not yet sorted and hashed: the output stage finishes the frames, off the
+/// workers' critical path.
 struct Output<S> {
-    pending: VecDeque<(Frame, Option<Vec<S>>)>,
+    pending: VecDeque<(Step, Partial<S>)>,
     gvt_advances: u64,
     times: ThreadTimes,
     gvt_samples: Vec<GvtSample>,
@@ -251,7 +252,6 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         // speculate ahead (`lead`) instead of blocking until the neighbour's step is done.
         let Some(mut slot) = self.worlds[w].try_lock() else {
             self.injector.push(w);
-            F::pause(0);
             return false;
         };
         self.scheduled[w].store(0);
@@ -284,7 +284,6 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             self.published[w].store(world.bound());
             drop(slot);
             self.injector.push(w);
-            F::pause(0);
             return false;
         }
         let acted = if world.wants_to_act(gvt) {
@@ -396,24 +395,10 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         if done.is_empty() {
             return;
         }
-        // Frames are finished and queued under the assembly lock, so they reach the output
-        // stage in step order whichever thread completes them.
-        let mut frames = Vec::with_capacity(done.len());
-        for (t, mut p) in done {
-            // Ids are unique: an unstable sort gives the one id order.
-            p.states.sort_unstable_by_key(|s| M::id(s));
-            p.events.sort();
-            let frame = Frame {
-                step: t,
-                hash: canonical_hash::<M>(p.states.iter()),
-                bodies: p.states.len(),
-                events: p.events,
-            };
-            let states = self.wanted.wants(t, frame.hash).then_some(p.states);
-            frames.push((frame, states));
-        }
-        let last_step = frames.last().map_or(0, |f| f.0.step);
-        self.out.lock().pending.extend(frames);
+        // Whole steps are queued under the assembly lock, so they reach the output stage in
+        // step order whichever thread completes them; the output stage sorts and hashes.
+        let last_step = done.last().map_or(0, |d| d.0);
+        self.out.lock().pending.extend(done);
         // Still under the assembly lock, so `committed` only grows: a thread that finished
         // earlier frames cannot overwrite a later step after the lock is released (the
         // balancing epochs read it to decide whether the run is over).
@@ -539,12 +524,17 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             let t0 = Instant::now();
             match self.find_task(&local, &stealers, me, &mut times.steals) {
                 Some(w) => {
-                    spins = 0;
                     let acted = self.run_world(w, &local, &mut times);
                     if acted {
+                        spins = 0;
                         times.actions += 1;
                         times.busy_seconds += t0.elapsed().as_secs_f64();
                     } else {
+                        // A turn that did nothing (the world was postponed, running
+                        // elsewhere, or had nothing to do): back off like an idle thread, so
+                        // a thread waiting for a laggard does not spin at full speed.
+                        F::pause(spins);
+                        spins = spins.saturating_add(1);
                         times.idle_seconds += t0.elapsed().as_secs_f64();
                     }
                     let g0 = Instant::now();
@@ -577,6 +567,27 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         out.times.actions += times.actions;
         out.times.steals += times.steals;
     }
+}
+
+/// Finishes committed step `t` from every world's contribution: its frame (states sorted by
+/// id and hashed as the reference hashes them, events sorted) and, if `wanted` asks for
+/// them, its states.
+fn finish_frame<M: CellModel>(
+    t: Step,
+    mut p: Partial<M::State>,
+    wanted: &StatesWanted,
+) -> (Frame, Option<Vec<M::State>>) {
+    // Ids are unique: an unstable sort gives the one id order.
+    p.states.sort_unstable_by_key(|s| M::id(s));
+    p.events.sort();
+    let frame = Frame {
+        step: t,
+        hash: canonical_hash::<M>(p.states.iter()),
+        bodies: p.states.len(),
+        events: p.events,
+    };
+    let states = wanted.wants(t, frame.hash).then_some(p.states);
+    (frame, states)
 }
 
 /// Runs `model` from `initial` for `steps` committed steps on `threads` OS threads.
@@ -628,7 +639,12 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         mut partition,
     } = super::build_worlds(model, grid, initial, config);
     let n = worlds.len();
-    let mut balancer = Balancer::new(&config.balance, grid.cell_count());
+    // Balancing shares the load between the threads unless told otherwise.
+    let mut balance = config.balance.clone();
+    if balance.workers == 0 {
+        balance.workers = threads;
+    }
+    let mut balancer = Balancer::new(&balance, grid.cell_count());
     let mut epoch_end = steps.min(balancer.next_round_after(0));
     let mut inboxes: Vec<Vec<Message<M::State>>> = (0..n).map(|_| Vec::new()).collect();
     for w in &mut worlds {
@@ -679,8 +695,10 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     });
     // The output stage: hand committed frames to the sink while the workers run.
     let mut frames = Vec::new();
-    let mut deliver = |batch: VecDeque<(Frame, Option<Vec<M::State>>)>| {
-        for (frame, states) in batch {
+    let wanted = shared.wanted.clone();
+    let mut deliver = |batch: VecDeque<(Step, Partial<M::State>)>| {
+        for (t, partial) in batch {
+            let (frame, states) = finish_frame::<M>(t, partial, &wanted);
             if frames.len() < steps as usize {
                 let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
                 sink(&frame, refs.as_deref());
@@ -788,7 +806,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
 fn run_epoch<M: CellModel + 'static, F: Facade>(
     shared: &Arc<Shared<M, F>>,
     threads: usize,
-    deliver: &mut impl FnMut(VecDeque<(Frame, Option<Vec<M::State>>)>),
+    deliver: &mut impl FnMut(VecDeque<(Step, Partial<M::State>)>),
 ) -> Result<(), ExecError> {
     // Tasks left from an earlier epoch are stale: every world is queued once again.
     while !shared.injector.steal().is_empty() {}

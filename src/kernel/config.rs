@@ -307,6 +307,14 @@ pub struct BalanceConfig {
     pub load: LoadSource,
     /// Seed of the tie-breaks between equal candidates.
     pub seed: u64,
+    /// How many workers the load is shared between (SPEC.md §K13): the load levels are
+    /// taken against `total / workers` instead of the mean over the worlds, so with fewer
+    /// workers than worlds the load gathers in as many territories as there are workers
+    /// (fewer borders) and the other worlds may stay idle (no famine then). 0: the
+    /// executor's own — the thread count for the threaded executor, the world count (the
+    /// thesis's mean) for the virtual one.
+    #[serde(default)]
+    pub workers: usize,
 }
 
 impl Default for BalanceConfig {
@@ -322,6 +330,7 @@ impl Default for BalanceConfig {
             max_cells: 64,
             load: LoadSource::Measured,
             seed: 0,
+            workers: 0,
         }
     }
 }

@@ -119,6 +119,15 @@ impl Balancer {
         self.config.load
     }
 
+    /// How many shares the total load is divided into for `worlds` worlds: the configured
+    /// workers if between 1 and `worlds`, else `worlds` (the thesis's mean).
+    pub fn sharers(&self, worlds: usize) -> usize {
+        match self.config.workers {
+            w if w >= 1 && w < worlds => w,
+            _ => worlds.max(1),
+        }
+    }
+
     /// The level of `load` against `mean`.
     pub fn level(&self, load: f64, mean: f64) -> LoadLevel {
         let c = &self.config;
@@ -179,7 +188,7 @@ impl Balancer {
                 .collect(),
             None => loads.clone(),
         };
-        let mean = est.iter().sum::<f64>() / n.max(1) as f64;
+        let mean = est.iter().sum::<f64>() / self.sharers(n) as f64;
         let levels = est.iter().map(|&l| self.level(l, mean)).collect();
         let mut world_bodies = vec![0u64; n];
         for (c, &b) in bodies.iter().enumerate() {
@@ -301,5 +310,35 @@ mod tests {
             "world 2 now owns part of world 0's old, loaded territory: {:?}",
             new.owners()
         );
+    }
+
+    #[test]
+    fn with_fewer_workers_than_worlds_the_load_is_shared_between_as_many_territories() {
+        // The same starving-world scene, shared between 2 workers: world 0 gives its
+        // neighbour part of the load, and world 2, far away, stays idle (no famine).
+        let g = Grid::covering(Vec3::zeros(), Vec3::new(9.0, 1.0, 1.0), 1.0);
+        let p = Partition::blocks(&g, 3);
+        let bodies: Vec<u32> = (0..9).map(|c| (c < 3) as u32 * 2).collect();
+        let config = BalanceConfig {
+            workers: 2,
+            ..BalanceConfig::on()
+        };
+        let mut b = Balancer::new(&config, g.cell_count());
+        assert_eq!(b.sharers(3), 2);
+        let new = b
+            .round(&g, &p, &[3.0, 0.0, 0.0], &[0.0; 3], &bodies, 20)
+            .expect("moves");
+        let r = &b.history()[0];
+        assert_eq!(r.famines, 0);
+        assert_eq!(
+            r.levels[0],
+            LoadLevel::Overloaded,
+            "3 against a share of 1.5"
+        );
+        assert!(new.cells_of(1).iter().any(|&c| c < 3), "{:?}", new.owners());
+        assert_eq!(new.cells_of(2), p.cells_of(2), "world 2 stays as it was");
+        // More workers than worlds, or 0, mean one share per world.
+        let b = Balancer::new(&BalanceConfig::on(), g.cell_count());
+        assert_eq!(b.sharers(3), 3);
     }
 }

@@ -67,7 +67,7 @@ impl<'a> Plan<'a> {
                 }
             })
             .collect();
-        let mean = est.iter().sum::<f64>() / est.len().max(1) as f64;
+        let mean = est.iter().sum::<f64>() / balancer.sharers(est.len()) as f64;
         Plan {
             balancer,
             grid,
@@ -209,6 +209,10 @@ impl<'a> Plan<'a> {
     /// hands its territory to its neighbours and takes a connected part of the most loaded
     /// world's.
     pub(super) fn fight_famine(&mut self) {
+        if self.balancer.sharers(self.est.len()) < self.est.len() {
+            // Fewer workers than worlds: idle worlds are expected, not starving.
+            return;
+        }
         let n = self.est.len() as WorldId;
         let mut hungry: Vec<WorldId> = (0..n)
             .filter(|&w| self.level(w) == LoadLevel::Underloaded)
