@@ -1,8 +1,11 @@
 //! The threaded executor: T OS threads run the kernel's worlds as tasks on crossbeam-deque
-//! work stealing (an [`Injector`], one [`Worker`] per thread, [`Stealer`]s). A world runs on
-//! at most one thread at a time (its lock); a world that cannot act (window full,
-//! conservative dependency) simply is not rescheduled until a message or a GVT advance gives
-//! it something to do, so its thread serves other worlds.
+//! queues ([`Injector`]s): one per thread, holding the worlds whose *home* is that thread
+//! (the thread that last computed them, so a world's logs stay in one core's cache), and
+//! one shared queue of worlds that had to wait (postponed behind a laggard, or running
+//! elsewhere). A thread takes from its own queue, then steals from the others', then takes
+//! a waiting world. A world runs on at most one thread at a time (its lock); a world that
+//! cannot act (window full, conservative dependency) simply is not rescheduled until a
+//! message or a GVT advance gives it something to do, so its thread serves other worlds.
 //!
 //! GVT (SPEC.md §K7, §10) without stopping the world: every world publishes a lower bound of
 //! its `bound()` after each turn, every inbox a lower bound of its messages' `affects`; a
@@ -13,8 +16,8 @@
 //! did not change meanwhile, so it never misses a message in transit between two of them.
 //! After GVT advances, each world hands its states of the new committed steps to a frame
 //! assembly on its next turn and fossil-collects; a frame is finished (all worlds merged,
-//! sorted, hashed) only once every world has contributed, and queued in step order for the
-//! output stage on the calling thread. A frame is never torn or speculative.
+//! sorted, hashed — by the output stage on the calling thread) only once every world has
+//! contributed, and queued in step order. A frame is never torn or speculative.
 //!
 //! This is the only module that starts threads, and it does so through [`Facade`].
 
@@ -31,7 +34,7 @@ use crate::kernel::world::{ActionKind, World};
 use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
 use crate::state::canonical_hash;
-use crossbeam_deque::{Injector, Steal, Stealer, Worker};
+use crossbeam_deque::{Injector, Steal};
 use std::collections::{BTreeMap, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
@@ -123,7 +126,15 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     /// GVT reader can tell whether its snapshot is consistent (SPEC.md §K7).
     version: F::Atomic,
     scheduled: Vec<F::Atomic>,
-    injector: Injector<usize>,
+    /// One queue of world tasks per thread. A world is queued on its *home* thread's queue
+    /// (the thread that last ran an action of it), so it keeps running on the same core
+    /// and its logs stay in that core's cache; an idle thread steals from the others.
+    queues: Vec<Injector<usize>>,
+    /// Per world, its home thread.
+    home: Vec<F::Atomic>,
+    /// Worlds that had to wait (postponed behind a laggard, or running elsewhere): any
+    /// thread takes them, so a waiting world never sits behind a busy thread's work.
+    waiting: Injector<usize>,
     gvt: F::Atomic,
     committed: F::Atomic,
     gvt_round: F::Atomic,
@@ -210,10 +221,16 @@ impl<S> Default for Output<S> {
 const STALL_CHECK_SPINS: u32 = 20_000;
 
 impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
-    fn schedule(&self, w: usize, local: &Worker<usize>) {
+    fn schedule(&self, w: usize) {
         if self.scheduled[w].swap(1) == 0 {
-            local.push(w);
+            self.requeue(w);
         }
+    }
+
+    /// Queues world `w` on its home thread's queue (its flag already set).
+    fn requeue(&self, w: usize) {
+        let home = self.home[w].load() as usize % self.queues.len();
+        self.queues[home].push(w);
     }
 
     fn fail(&self, e: ExecError) {
@@ -225,7 +242,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     }
 
     /// Sends `m`: into its receiver's inbox, lowering that inbox's published minimum.
-    fn send(&self, m: Message<M::State>, local: &Worker<usize>) {
+    fn send(&self, m: Message<M::State>) {
         let d = m.dst_world as usize;
         let affects = m.affects();
         {
@@ -233,7 +250,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             inbox.push(m);
             self.lower(&self.inbox_min[d], affects);
         }
-        self.schedule(d, local);
+        self.schedule(d);
     }
 
     fn lower(&self, a: &F::Atomic, v: u64) {
@@ -245,13 +262,13 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// One turn of world `w`: receive its inbox, hand its newly committed steps to the frame
     /// assembly and fossil-collect, act if it wants to, route the output, publish its bound.
     /// Returns whether it acted.
-    fn run_world(&self, w: usize, local: &Worker<usize>, times: &mut ThreadTimes) -> bool {
+    fn run_world(&self, w: usize, me: usize, times: &mut ThreadTimes) -> bool {
         // A world another thread is running is not waited for: its task goes back to the
         // shared queue with its flag still set (so the running thread does not queue a
         // second copy), and this thread serves another world — e.g. its own, which may
         // speculate ahead (`lead`) instead of blocking until the neighbour's step is done.
         let Some(mut slot) = self.worlds[w].try_lock() else {
-            self.injector.push(w);
+            self.waiting.push(w);
             return false;
         };
         self.scheduled[w].store(0);
@@ -283,7 +300,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         if self.postpone(w, world) {
             self.published[w].store(world.bound());
             drop(slot);
-            self.injector.push(w);
+            self.waiting.push(w);
             return false;
         }
         let acted = if world.wants_to_act(gvt) {
@@ -307,7 +324,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             match acted {
                 Ok(out) => {
                     for m in out {
-                        self.send(m, local);
+                        self.send(m);
                     }
                     true
                 }
@@ -328,8 +345,12 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             self.version.fetch_add(1);
         }
         self.published[w].store(bound);
-        if acted && world.wants_to_act(self.gvt.load()) {
-            self.schedule(w, local);
+        if acted {
+            // The world's home follows the thread that computes it.
+            self.home[w].store(me as u64);
+            if world.wants_to_act(self.gvt.load()) {
+                self.schedule(w);
+            }
         }
         acted
     }
@@ -412,7 +433,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// A GVT round from the published bounds, without stopping any world: a snapshot is
     /// accepted only if no bound was raised while it was read (SPEC.md §K7). Returns whether
     /// GVT advanced (every world is then scheduled, to commit and fossil-collect).
-    fn gvt_round(&self, local: &Worker<usize>) -> bool {
+    fn gvt_round(&self) -> bool {
         if self.gvt_round.swap(1) == 1 {
             return false;
         }
@@ -447,7 +468,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         self.gvt_round.store(0);
         if advanced {
             for w in 0..self.worlds.len() {
-                self.schedule(w, local);
+                self.schedule(w);
             }
         }
         advanced
@@ -481,35 +502,29 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
     }
 
-    fn find_task(
-        &self,
-        local: &Worker<usize>,
-        stealers: &[Stealer<usize>],
-        me: usize,
-        steals: &mut u64,
-    ) -> Option<usize> {
-        if let Some(t) = local.pop() {
-            return Some(t);
-        }
+    /// The next world task for thread `me`: from its own queue, else stolen from another
+    /// thread's (after `spins` turns in a row that did nothing, the others first, so work
+    /// queued behind a busy thread is taken by the idle one), else a waiting world.
+    fn find_task(&self, me: usize, spins: u32, steals: &mut u64) -> Option<usize> {
+        let n = self.queues.len();
+        let first = if spins > 0 { 1 } else { 0 };
         loop {
             let mut retry = false;
-            match self.injector.steal_batch_and_pop(local) {
-                Steal::Success(t) => return Some(t),
-                Steal::Retry => retry = true,
-                Steal::Empty => {}
-            }
-            for (k, s) in stealers.iter().enumerate() {
-                if k == me {
-                    continue;
-                }
-                match s.steal() {
+            for k in 0..n {
+                let q = (me + first + k) % n;
+                match self.queues[q].steal() {
                     Steal::Success(t) => {
-                        *steals += 1;
+                        *steals += (q != me) as u64;
                         return Some(t);
                     }
                     Steal::Retry => retry = true,
                     Steal::Empty => {}
                 }
+            }
+            match self.waiting.steal() {
+                Steal::Success(t) => return Some(t),
+                Steal::Retry => retry = true,
+                Steal::Empty => {}
             }
             if !retry {
                 return None;
@@ -517,14 +532,14 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
     }
 
-    fn worker_loop(&self, me: usize, local: Worker<usize>, stealers: Arc<Vec<Stealer<usize>>>) {
+    fn worker_loop(&self, me: usize) {
         let mut times = ThreadTimes::default();
         let mut spins = 0u32;
         while self.status.load() == RUNNING {
             let t0 = Instant::now();
-            match self.find_task(&local, &stealers, me, &mut times.steals) {
+            match self.find_task(me, spins, &mut times.steals) {
                 Some(w) => {
-                    let acted = self.run_world(w, &local, &mut times);
+                    let acted = self.run_world(w, me, &mut times);
                     if acted {
                         spins = 0;
                         times.actions += 1;
@@ -538,12 +553,12 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
                         times.idle_seconds += t0.elapsed().as_secs_f64();
                     }
                     let g0 = Instant::now();
-                    self.gvt_round(&local);
+                    self.gvt_round();
                     times.gvt_seconds += g0.elapsed().as_secs_f64();
                 }
                 None => {
                     let g0 = Instant::now();
-                    let advanced = self.gvt_round(&local);
+                    let advanced = self.gvt_round();
                     times.gvt_seconds += g0.elapsed().as_secs_f64();
                     if !advanced {
                         let i0 = Instant::now();
@@ -675,7 +690,11 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         inbox_min,
         version: F::Atomic::new(0),
         scheduled: (0..n).map(|_| F::Atomic::new(1)).collect(),
-        injector: Injector::new(),
+        queues: (0..threads).map(|_| Injector::new()).collect(),
+        home: (0..n)
+            .map(|w| F::Atomic::new((w % threads) as u64))
+            .collect(),
+        waiting: Injector::new(),
         gvt: F::Atomic::new(1),
         committed: F::Atomic::new(0),
         gvt_round: F::Atomic::new(0),
@@ -809,20 +828,17 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
     deliver: &mut impl FnMut(VecDeque<(Step, Partial<M::State>)>),
 ) -> Result<(), ExecError> {
     // Tasks left from an earlier epoch are stale: every world is queued once again.
-    while !shared.injector.steal().is_empty() {}
+    for q in shared.queues.iter().chain([&shared.waiting]) {
+        while !q.steal().is_empty() {}
+    }
     for w in 0..shared.worlds.len() {
         shared.scheduled[w].store(1);
-        shared.injector.push(w);
+        shared.requeue(w);
     }
-    let locals: Vec<Worker<usize>> = (0..threads).map(|_| Worker::new_fifo()).collect();
-    let stealers = Arc::new(locals.iter().map(|w| w.stealer()).collect::<Vec<_>>());
-    let handles: Vec<F::Handle> = locals
-        .into_iter()
-        .enumerate()
-        .map(|(me, local)| {
+    let handles: Vec<F::Handle> = (0..threads)
+        .map(|me| {
             let shared = shared.clone();
-            let stealers = stealers.clone();
-            F::spawn(move || shared.worker_loop(me, local, stealers))
+            F::spawn(move || shared.worker_loop(me))
         })
         .collect();
     while shared.status.load() == RUNNING {

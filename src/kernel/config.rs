@@ -327,7 +327,7 @@ impl Default for BalanceConfig {
             overloaded: 1.5,
             smoothing: 0.5,
             cooldown: 2,
-            max_cells: 64,
+            max_cells: 512,
             load: LoadSource::Measured,
             seed: 0,
             workers: 0,
