@@ -1237,7 +1237,12 @@ impl<M: CellModel> World<M> {
         // that also receive early migrations, or any cell when inputs apply at h + 1, take the
         // general rule
         // (`rebuild_state`). Either way a state is the id-sorted union (K1).
-        let mut fresh: Vec<Vec<M::State>> = (0..n).map(|_| Vec::new()).collect();
+        // Sized like the cell's state at h: bodies mostly stay in their cell.
+        let mut fresh: Vec<Vec<M::State>> = self.slots[i]
+            .states
+            .iter()
+            .map(|v| Vec::with_capacity(v.len()))
+            .collect();
         let mut landed = vec![false; n];
         let mut migs: BTreeSet<(usize, WorldId)> = BTreeSet::new();
         for x in 0..n {
