@@ -191,7 +191,8 @@ struct Assembly<S> {
 
 struct Partial<S> {
     worlds: usize,
-    states: Vec<S>,
+    /// Each contributing world's states (any order).
+    states: Vec<Vec<S>>,
     events: Vec<Event>,
 }
 
@@ -385,17 +386,29 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         if slot.contributed >= last {
             return;
         }
-        let mut assembly = self.assembly.lock();
+        // Copied before taking the lock, so two worlds' copies do not wait for each other.
+        let mine: Vec<(Step, Vec<M::State>, Vec<Event>)> = (slot.contributed + 1..=last)
+            .map(|t| {
+                (
+                    t,
+                    slot.world.state_at(t).cloned().collect(),
+                    slot.world.events_at(t - 1).copied().collect(),
+                )
+            })
+            .collect();
         for t in slot.contributed + 1..=last {
+            slot.world.note_committed(t);
+        }
+        let mut assembly = self.assembly.lock();
+        for (t, states, events) in mine {
             let part = assembly.partial.entry(t).or_insert_with(|| Partial {
                 worlds: 0,
                 states: Vec::new(),
                 events: Vec::new(),
             });
             part.worlds += 1;
-            part.states.extend(slot.world.state_at(t).cloned());
-            part.events.extend(slot.world.events_at(t - 1).copied());
-            slot.world.note_committed(t);
+            part.states.push(states);
+            part.events.extend(events);
         }
         slot.contributed = last;
         slot.world.sample_log_bytes();
@@ -592,16 +605,21 @@ fn finish_frame<M: CellModel>(
     mut p: Partial<M::State>,
     wanted: &StatesWanted,
 ) -> (Frame, Option<Vec<M::State>>) {
-    // Ids are unique: an unstable sort gives the one id order.
-    p.states.sort_unstable_by_key(|s| M::id(s));
+    // Sorted through (id, state) keys, without moving the states; ids are unique, so an
+    // unstable sort gives the one id order.
+    let mut keyed: Vec<(u64, &M::State)> =
+        p.states.iter().flatten().map(|s| (M::id(s), s)).collect();
+    keyed.sort_unstable_by_key(|k| k.0);
     p.events.sort();
     let frame = Frame {
         step: t,
-        hash: canonical_hash::<M>(p.states.iter()),
-        bodies: p.states.len(),
+        hash: canonical_hash::<M>(keyed.iter().map(|k| k.1)),
+        bodies: keyed.len(),
         events: p.events,
     };
-    let states = wanted.wants(t, frame.hash).then_some(p.states);
+    let states = wanted
+        .wants(t, frame.hash)
+        .then(|| keyed.iter().map(|k| k.1.clone()).collect());
     (frame, states)
 }
 
