@@ -240,3 +240,23 @@ fn delta_ghosts_send_nothing_for_a_resting_border_and_commit_the_same_bits() {
         "ghosts sent while the pile sleeps"
     );
 }
+
+#[test]
+fn delta_ghosts_under_adversarial_schedules_of_a_landing_pile_commit_the_reference_bits() {
+    // 1,000 cubes landing under a seeded schedule: ghosts change every step, worlds run far
+    // ahead on predicted views, late ghosts and their successors arrive out of order and are
+    // re-sent after rollbacks. World mode with schedule seed 0 caught a view carried forward
+    // too little after a re-sent ghost that no longer announced a successor (it diverged
+    // from step 50 on); smaller piles did not.
+    let s = builtin("falling-cubes", Some(1000), 0).unwrap();
+    let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());
+    let exp = reference(&m, &g, &b, 55);
+    for mode in [RollbackMode::World, RollbackMode::Cell] {
+        let cfg = KernelConfig::new(8)
+            .mode(mode)
+            .window(16)
+            .ghosts(GhostPolicy::Delta)
+            .schedule(ScheduleSpec::Seeded(0));
+        compare(&m, &g, &b, &cfg, &exp).unwrap_or_else(|e| panic!("{mode:?}: {e}"));
+    }
+}

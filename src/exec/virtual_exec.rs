@@ -297,6 +297,7 @@ impl<M: CellModel> VirtualRun<M> {
                 seq: self.inputs,
                 bodies: bodies.clone(),
                 removes: removes.clone(),
+                follows: false,
             })
             .collect();
         self.inputs_posted.push(msgs[0].clone());

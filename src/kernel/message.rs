@@ -60,6 +60,9 @@ pub struct Message<S> {
     pub bodies: Vec<(u32, S)>,
     /// For an input: the ids of the bodies it removes (empty otherwise).
     pub removes: Vec<BodyId>,
+    /// Delta ghosts (SPEC.md §K4): the sender's state of the cell at `step` differs from its
+    /// state at `step − 1`, so a ghost of `step + 1` follows. False for everything else.
+    pub follows: bool,
 }
 
 /// An external event at a step, applied to the states at that step (before they are used).

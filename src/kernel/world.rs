@@ -64,8 +64,8 @@ impl<S> Out<S> {
 /// What a world has received under one identity (kind, step, source cell).
 #[derive(Debug)]
 struct Recv<S> {
-    /// Live positive versions: (seq, bodies).
-    positives: Vec<(u32, Vec<(u32, S)>)>,
+    /// Live positive versions: (seq, bodies, follows).
+    positives: Vec<(u32, Vec<(u32, S)>, bool)>,
     /// Anti-messages that arrived before their positive twin.
     antis: Vec<u32>,
 }
@@ -81,7 +81,7 @@ impl<S> Default for Recv<S> {
 
 impl<S> Recv<S> {
     /// The effective version: the live positive with the highest sequence number.
-    fn effective(&self) -> Option<&(u32, Vec<(u32, S)>)> {
+    fn effective(&self) -> Option<&(u32, Vec<(u32, S)>, bool)> {
         self.positives.iter().max_by_key(|p| p.0)
     }
 }
@@ -91,6 +91,8 @@ impl<S> Recv<S> {
 struct Sent<S> {
     seq: u32,
     live: Option<Vec<(u32, S)>>,
+    /// The live version's `follows` flag.
+    follows: bool,
 }
 
 /// Everything a world holds about one step.
@@ -624,6 +626,13 @@ impl<M: CellModel> World<M> {
     /// Drops everything about steps before `keep_from` (pass GVT − 1: the states at GVT − 1
     /// are final but computations at GVT − 1 may still be redone).
     pub fn fossil_collect(&mut self, keep_from: Step) {
+        // Delta ghosts compare the states two steps before a ghost's step (K4): one more
+        // final step is kept.
+        let keep_from = if self.delta {
+            keep_from.saturating_sub(1)
+        } else {
+            keep_from
+        };
         let keep_from = keep_from.min(self.base + self.slots.len() as Step - 1);
         while self.base < keep_from {
             self.slots.pop_front();
@@ -737,28 +746,29 @@ impl<M: CellModel> World<M> {
         cell: u32,
         w: WorldId,
         content: Option<Vec<(u32, M::State)>>,
+        follows: bool,
         out: &mut Vec<Message<M::State>>,
     ) {
         let conservative = self.mode == RollbackMode::Conservative;
         let i = self.si(step);
-        let live = self.slots[i]
-            .sent
-            .get(&(kind, cell, w))
-            .and_then(|s| s.live.as_ref());
+        let sent = self.slots[i].sent.get(&(kind, cell, w));
+        let live = sent.and_then(|s| s.live.as_ref());
+        let live_follows = sent.is_some_and(|s| s.follows);
         if !conservative {
             let same = match (live, &content) {
                 (None, None) => true,
-                (Some(a), Some(b)) => self.same_pairs(a, b),
+                (Some(a), Some(b)) => live_follows == follows && self.same_pairs(a, b),
                 _ => false,
             };
             if same {
                 return;
             }
         }
-        let entry = self.slots[i]
-            .sent
-            .entry((kind, cell, w))
-            .or_insert(Sent { seq: 0, live: None });
+        let entry = self.slots[i].sent.entry((kind, cell, w)).or_insert(Sent {
+            seq: 0,
+            live: None,
+            follows: false,
+        });
         let me = self.id;
         let bug = self.bug;
         let msg = |sign, seq, bodies| Message {
@@ -771,6 +781,7 @@ impl<M: CellModel> World<M> {
             seq,
             bodies,
             removes: Vec::new(),
+            follows: sign == Sign::Positive && follows,
         };
         if entry.live.take().is_some() {
             let dropped = bug == PlantedBug::DropLoneAnti && content.is_none();
@@ -782,6 +793,7 @@ impl<M: CellModel> World<M> {
         if let Some(content) = content {
             entry.seq += 1;
             entry.live = Some(content.clone());
+            entry.follows = follows;
             // Null messages are conservative mode's; an empty delta ghost (a border cell that
             // emptied) is news, counted as a ghost only.
             if conservative && content.is_empty() {
@@ -797,36 +809,55 @@ impl<M: CellModel> World<M> {
         }
     }
 
+    /// Whether the state of own cell `x` at `u` differs from its state at `u − 1` (at the
+    /// origin step: whether it is not empty).
+    fn changed(&self, x: usize, u: Step) -> bool {
+        let i = self.si(u);
+        let cur = &self.slots[i].states[x];
+        if u == self.origin {
+            return !cur.is_empty();
+        }
+        assert!(
+            i > 0,
+            "ghost of step {u} evaluated without the state of step {}",
+            u - 1
+        );
+        !Self::same_states(&self.slots[i - 1].states[x], cur)
+    }
+
     /// (Re)sends the ghost of own cell `x` at step `t` to every world owning a neighbour.
-    /// Conservative mode: the whole state, always (possibly a null message). Optimistic
-    /// modes (K4, delta ghosts): at the origin step the state if not empty; later the state
-    /// only if it differs from the state at `t − 1` (an explicit empty ghost if the cell
-    /// emptied), else no ghost — and lazily, so a re-evaluation that changes nothing sends
+    /// Conservative mode: the whole state, always (possibly a null message). Full ghosts:
+    /// the state if not empty. Delta ghosts (K4): the state if it changed at `t` or at
+    /// `t − 1` (so a change is always followed by the next step's ghost, which its `follows`
+    /// flag announces), else no ghost. Lazily: a re-evaluation that changes nothing sends
     /// nothing.
     fn send_ghost(&mut self, x: usize, t: Step, out: &mut Vec<Message<M::State>>) {
         if self.targets[x].is_empty() {
             return;
         }
         let cell = self.cells[x];
-        let i = self.si(t);
-        let cur = &self.slots[i].states[x];
-        let changed = if self.mode == RollbackMode::Conservative {
-            true
-        } else if !self.delta || t == self.origin {
-            !cur.is_empty()
+        let (send, follows) = if self.mode == RollbackMode::Conservative {
+            (true, false)
+        } else if !self.delta {
+            (!self.slots[self.si(t)].states[x].is_empty(), false)
         } else {
-            assert!(
-                i > 0,
-                "ghost of step {t} evaluated without the state of step {}",
-                t - 1
-            );
-            !Self::same_states(&self.slots[i - 1].states[x], cur)
+            let now = self.changed(x, t);
+            (now || (t > self.origin && self.changed(x, t - 1)), now)
         };
+        let cur = &self.slots[self.si(t)].states[x];
         let content: Option<Vec<(u32, M::State)>> =
-            changed.then(|| cur.iter().map(|b| (cell, b.clone())).collect());
+            send.then(|| cur.iter().map(|b| (cell, b.clone())).collect());
         for k in 0..self.targets[x].len() {
             let w = self.targets[x][k];
-            self.send(MessageKind::Ghost, t, cell, w, content.clone(), out);
+            self.send(
+                MessageKind::Ghost,
+                t,
+                cell,
+                w,
+                content.clone(),
+                follows,
+                out,
+            );
         }
     }
 
@@ -846,7 +877,15 @@ impl<M: CellModel> World<M> {
             .unwrap_or_default();
         let content =
             (self.mode == RollbackMode::Conservative || !content.is_empty()).then_some(content);
-        self.send(MessageKind::Migrate, s + 1, self.cells[x], w, content, out);
+        self.send(
+            MessageKind::Migrate,
+            s + 1,
+            self.cells[x],
+            w,
+            content,
+            false,
+            out,
+        );
     }
 
     /// Rebuilds the state of own cell `d` at `t ≥ base + 1` from the outputs at `t − 1` of the
@@ -943,9 +982,12 @@ impl<M: CellModel> World<M> {
     fn on_state_change(&mut self, d: u32, t: Step, old: Vec<M::State>) -> bool {
         let x = self.part.local(d) as usize;
         self.ghost_due.insert((t, x));
-        if t < self.head && self.delta {
-            // The ghost of `t + 1` says whether the state changed since `t`.
-            self.ghost_due.insert((t + 1, x));
+        if self.delta {
+            // The ghosts of `t + 1` and `t + 2` depend on whether the state changed at `t`
+            // and at `t + 1`.
+            for u in t + 1..=(t + 2).min(self.head) {
+                self.ghost_due.insert((u, x));
+            }
         }
         if t >= self.head {
             return false;
@@ -1014,7 +1056,7 @@ impl<M: CellModel> World<M> {
                     r.antis.swap_remove(k);
                     self.counters.annihilated += 1;
                 } else {
-                    r.positives.push((msg.seq, msg.bodies));
+                    r.positives.push((msg.seq, msg.bodies, msg.follows));
                 }
             }
             Sign::Anti => {
@@ -1033,13 +1075,16 @@ impl<M: CellModel> World<M> {
         if kind == MessageKind::Ghost {
             // The view of `src` at `step`: the effective ghost, else the view of the step
             // before (K4, delta ghosts).
-            let view = match r.effective() {
-                Some(e) if e.1.is_empty() => None,
-                Some(e) => Some(Arc::new(e.1.iter().map(|p| p.1.clone()).collect())),
-                None if i > 0 && self.delta => self.slots[i - 1].ghosts.get(&src).cloned(),
-                None => None,
+            let (view, follows) = match r.effective() {
+                Some(e) if e.1.is_empty() => (None, e.2),
+                Some(e) => (
+                    Some(Arc::new(e.1.iter().map(|p| p.1.clone()).collect())),
+                    e.2,
+                ),
+                None if i > 0 && self.delta => (self.slots[i - 1].ghosts.get(&src).cloned(), false),
+                None => (None, false),
             };
-            let dirtied = self.set_ghost_view(src, step, view);
+            let dirtied = self.set_ghost_view(src, step, view, follows);
             if step < self.head && dirtied.is_none() {
                 self.counters.stragglers_absorbed += 1;
             }
@@ -1087,21 +1132,24 @@ impl<M: CellModel> World<M> {
         }
     }
 
-    /// Sets the view of foreign cell `src` at `t` to `view` (`None`: empty) and carries it
-    /// forward to the later steps that inherit it (those without an effective ghost of their
-    /// own), stopping at the first step whose view does not change. At each computed step
-    /// (below the head) whose view changed, the own cells that read the change become dirty.
-    /// Returns the first step made dirty, if any.
+    /// Sets the view of foreign cell `src` at `t` to `view` (`None`: empty) and, with delta
+    /// ghosts, carries it forward to the later steps that inherit it (up to the next step
+    /// with an effective ghost of its own) — unless the ghost `follows` (a ghost of `t + 1`
+    /// is on its way: the later views are left as they are, as the computations used them,
+    /// until it arrives). At each computed
+    /// step (below the head) whose view changed, the own cells that read the change become
+    /// dirty. Returns the first step made dirty, if any.
     fn set_ghost_view(
         &mut self,
         src: u32,
         t: Step,
         view: Option<Arc<Vec<M::State>>>,
+        follows: bool,
     ) -> Option<Step> {
         let mut first = None;
         let mut u = t;
         while let Some(slot) = self.slots.get_mut((u - self.base) as usize) {
-            if u > t && !self.delta {
+            if u > t && (!self.delta || follows) {
                 break;
             }
             if u > t
@@ -1121,10 +1169,9 @@ impl<M: CellModel> World<M> {
                 (Some(a), Some(b)) => Arc::ptr_eq(a, b) || Self::same_states(a, b),
                 _ => false,
             };
-            if unchanged {
-                break;
-            }
-            if u < self.head {
+            // An unchanged step does not end the walk: the steps after a ghost that
+            // announced a successor may still hold views from before it.
+            if !unchanged && u < self.head {
                 let old: &[M::State] = old.as_ref().map_or(&[][..], |v| &v[..]);
                 let new: &[M::State] = view.as_ref().map_or(&[][..], |v| &v[..]);
                 let cells = self.cells_reading(src, u, old, new);
