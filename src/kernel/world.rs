@@ -61,11 +61,14 @@ impl<S> Out<S> {
     }
 }
 
+/// One received positive version: (sequence number, bodies, follows).
+type Version<S> = (u32, Vec<(u32, S)>, bool);
+
 /// What a world has received under one identity (kind, step, source cell).
 #[derive(Debug)]
 struct Recv<S> {
-    /// Live positive versions: (seq, bodies, follows).
-    positives: Vec<(u32, Vec<(u32, S)>, bool)>,
+    /// Live positive versions.
+    positives: Vec<Version<S>>,
     /// Anti-messages that arrived before their positive twin.
     antis: Vec<u32>,
 }
@@ -81,7 +84,7 @@ impl<S> Default for Recv<S> {
 
 impl<S> Recv<S> {
     /// The effective version: the live positive with the highest sequence number.
-    fn effective(&self) -> Option<&(u32, Vec<(u32, S)>, bool)> {
+    fn effective(&self) -> Option<&Version<S>> {
         self.positives.iter().max_by_key(|p| p.0)
     }
 }
