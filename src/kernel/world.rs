@@ -738,16 +738,14 @@ impl<M: CellModel> World<M> {
         a.len() == b.len() && a.iter().zip(b).all(|(x, y)| same_state::<M>(x, y))
     }
 
-    /// Sends (kind, step, cell) to `w` with `content` (`None`: no message): in conservative
-    /// mode always (an empty content is a null message); otherwise lazily — nothing if the
-    /// live version sent before has the same content (or there is none and `content` is
-    /// `None`), else an anti-message for it (if any) and the new version (if any).
+    /// Sends `(kind, step, cell)` to world `w` with `content` (`None`: no message) and the
+    /// `follows` flag: in conservative mode always (an empty content is a null message);
+    /// otherwise lazily — nothing if the live version sent before has the same content and
+    /// flag (or there is none and `content` is `None`), else an anti-message for it (if any)
+    /// and the new version (if any).
     fn send(
         &mut self,
-        kind: MessageKind,
-        step: Step,
-        cell: u32,
-        w: WorldId,
+        (kind, step, cell, w): (MessageKind, Step, u32, WorldId),
         content: Option<Vec<(u32, M::State)>>,
         follows: bool,
         out: &mut Vec<Message<M::State>>,
@@ -853,10 +851,7 @@ impl<M: CellModel> World<M> {
         for k in 0..self.targets[x].len() {
             let w = self.targets[x][k];
             self.send(
-                MessageKind::Ghost,
-                t,
-                cell,
-                w,
+                (MessageKind::Ghost, t, cell, w),
                 content.clone(),
                 follows,
                 out,
@@ -880,15 +875,8 @@ impl<M: CellModel> World<M> {
             .unwrap_or_default();
         let content =
             (self.mode == RollbackMode::Conservative || !content.is_empty()).then_some(content);
-        self.send(
-            MessageKind::Migrate,
-            s + 1,
-            self.cells[x],
-            w,
-            content,
-            false,
-            out,
-        );
+        let id = (MessageKind::Migrate, s + 1, self.cells[x], w);
+        self.send(id, content, false, out);
     }
 
     /// Rebuilds the state of own cell `d` at `t ≥ base + 1` from the outputs at `t − 1` of the
