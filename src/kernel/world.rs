@@ -5,10 +5,11 @@
 //! ([`World::bound`]), reads committed states and events, and fossil-collects.
 //!
 //! The unit of everything is *the state of a cell at a step*: the id-sorted states of the
-//! entities homed in that cell at that step. A world keeps, for every step from GVT − 1 to
-//! its head, one slot holding, per own cell: its state, and the output of its computation
-//! (the bodies it homes at the next step, with their home cells, and its events); per
-//! foreign neighbour cell: the ghost state received; per (own destination cell, foreign
+//! entities homed in that cell at that step. A world keeps, for every step from GVT − 1
+//! (GVT − 2 with delta ghosts) to its head, one slot holding, per own cell: its state, and
+//! the output of its computation (the bodies it homes at the next step, with their home
+//! cells, and its events); per foreign neighbour cell: its view (the ghost state received,
+//! or with delta ghosts the view of the step before); per (own destination cell, foreign
 //! source cell): the bodies migrating in; and the logs of messages received and sent.
 //!
 //! The state of own cell `d` at `t + 1` is rebuilt, whenever one of its inputs changes, as the
@@ -135,7 +136,9 @@ impl<S: Clone> Slot<S> {
         }
     }
 
-    fn bytes(&self) -> usize {
+    /// Bytes this slot holds. A ghost view shared with the slot before (`prev`, the same
+    /// `Arc`) is counted there only; inputs count their states and removed ids.
+    fn bytes(&self, prev: Option<&Slot<S>>) -> usize {
         let s = std::mem::size_of::<S>();
         let p = std::mem::size_of::<(u32, S)>();
         let v = std::mem::size_of::<Vec<S>>();
@@ -144,11 +147,15 @@ impl<S: Clone> Slot<S> {
         for o in self.outs.iter().flatten() {
             b += o.bodies.len() * p + o.events.len() * std::mem::size_of::<Event>();
         }
-        b += self
-            .ghosts
-            .values()
-            .map(|g| v + 8 + g.len() * s)
-            .sum::<usize>();
+        for (src, g) in &self.ghosts {
+            let shared = prev
+                .and_then(|p| p.ghosts.get(src))
+                .is_some_and(|h| Arc::ptr_eq(g, h));
+            b += 16 + if shared { 0 } else { v + g.len() * s };
+        }
+        for (removes, adds) in self.inputs.values() {
+            b += 8 + removes.len() * 8 + adds.len() * p;
+        }
         b += self
             .foreign_in
             .values()
@@ -612,7 +619,13 @@ impl<M: CellModel> World<M> {
 
     /// Bytes held by the logs now.
     pub fn log_bytes(&self) -> u64 {
-        self.slots.iter().map(|s| s.bytes()).sum::<usize>() as u64
+        let mut prev = None;
+        let mut b = 0;
+        for s in &self.slots {
+            b += s.bytes(prev);
+            prev = Some(s);
+        }
+        b as u64
     }
 
     /// Number of steps the logs hold now.
@@ -627,7 +640,8 @@ impl<M: CellModel> World<M> {
     }
 
     /// Drops everything about steps before `keep_from` (pass GVT − 1: the states at GVT − 1
-    /// are final but computations at GVT − 1 may still be redone).
+    /// are final but computations at GVT − 1 may still be redone); with delta ghosts one
+    /// step more is kept (GVT − 2).
     pub fn fossil_collect(&mut self, keep_from: Step) {
         // Delta ghosts compare the states two steps before a ghost's step (K4): one more
         // final step is kept.
@@ -1073,7 +1087,12 @@ impl<M: CellModel> World<M> {
                     e.2,
                 ),
                 None if i > 0 && self.delta => (self.slots[i - 1].ghosts.get(&src).cloned(), false),
-                None => (None, false),
+                None => {
+                    // Empty is the view before the origin; a delta ghost's step is always
+                    // above `base` otherwise (GVT argument, K7).
+                    debug_assert!(!self.delta || step == self.origin);
+                    (None, false)
+                }
             };
             let dirtied = self.set_ghost_view(src, step, view, follows);
             if step < self.head && dirtied.is_none() {
