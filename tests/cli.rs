@@ -613,6 +613,67 @@ fn verify_reports_the_first_divergence_of_a_planted_bug_with_a_command_that_repr
 }
 
 #[test]
+fn verify_checks_full_ghosts_too_and_its_reproduce_command_keeps_the_policy() {
+    let o = soda(&[
+        "verify",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "200",
+        "--steps",
+        "60",
+        "--modes",
+        "cell",
+        "--schedules",
+        "2",
+        "--repeats",
+        "1",
+        "--ghosts",
+        "full",
+        "--planted-bug",
+        "drop-lone-anti",
+    ]);
+    let out = stdout(&o);
+    assert_eq!(o.status.code(), Some(1), "{out}");
+    let cmd = out
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("reproduce: soda "))
+        .expect("a reproduce line");
+    assert!(cmd.contains("--ghosts full"), "{cmd}");
+    let args: Vec<&str> = cmd.split_whitespace().collect();
+    let step = args[args.iter().position(|a| *a == "--steps").unwrap() + 1];
+    let reference = summary_hash(&ok(&[
+        "run",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "200",
+        "--steps",
+        step,
+    ]));
+    assert_ne!(summary_hash(&ok(&args)), reference, "{cmd}");
+    // Without the planted bug both policies commit the reference's bits.
+    let o = soda(&[
+        "verify",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "200",
+        "--steps",
+        "40",
+        "--modes",
+        "cell,world",
+        "--schedules",
+        "2",
+        "--repeats",
+        "1",
+        "--ghosts",
+        "full",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stdout(&o));
+}
+
+#[test]
 fn verify_rejects_an_unknown_mode_naming_the_allowed_ones() {
     let err = fails(&["verify", "--modes", "cell,fast"]);
     assert!(

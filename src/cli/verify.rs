@@ -3,7 +3,7 @@
 //! with the reference's and, on a mismatch, report the first step, body, field and cell that
 //! differ with the command that reproduces it. Exits non-zero on any divergence.
 
-use super::exec_args::{default_threads, ModeArg, PartitionArg, PlantedBugArg};
+use super::exec_args::{default_threads, GhostsArg, ModeArg, PartitionArg, PlantedBugArg};
 use super::output::print;
 use super::source::SceneArgs;
 use anyhow::{bail, Context, Result};
@@ -69,6 +69,10 @@ pub struct VerifyArgs {
     /// How cells are assigned to worlds.
     #[arg(long, value_enum, default_value = "blocks", help_heading = "Run")]
     pub partition: PartitionArg,
+
+    /// Ghost policy of the optimistic modes (see `soda run --help`).
+    #[arg(long, value_enum, default_value = "delta", help_heading = "Run")]
+    pub ghosts: GhostsArg,
 
     /// A deliberate kernel bug, to show that verify catches it (never for real runs).
     #[arg(long, value_enum, hide = true)]
@@ -177,6 +181,7 @@ fn run_check(
         .window(args.window)
         .partition(args.partition.into())
         .schedule(ScheduleSpec::Seeded(check.seed.unwrap_or(0)))
+        .ghosts(args.ghosts.into())
         .record_schedule(false);
     kernel.planted_bug = args.planted_bug.map_or(PlantedBug::None, Into::into);
     let options = RunOptions {
@@ -284,6 +289,9 @@ fn reproduce(
         args.window,
         PartitionKind::from(args.partition).name()
     );
+    if args.ghosts == GhostsArg::Full {
+        cmd += " --ghosts full";
+    }
     match check.seed {
         Some(seed) => cmd += &format!(" --schedule-seed {seed}"),
         None => cmd += &format!(" --threads {threads}"),
