@@ -33,7 +33,6 @@ use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::{ActionKind, World};
 use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
-use crate::state::canonical_hash;
 use crossbeam_deque::{Injector, Steal};
 use std::collections::{BTreeMap, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -146,7 +145,6 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     /// How many steps a world may compute ahead of the slowest other world before it lets
     /// laggards run first (optimistic modes; `KernelConfig::lead`).
     lead: Step,
-    wanted: StatesWanted,
     assembly: F::Mutex<Assembly<M::State>>,
     out: F::Mutex<Output<M::State>>,
     error: F::Mutex<Option<ExecError>>,
@@ -597,29 +595,17 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     }
 }
 
-/// Finishes committed step `t` from every world's contribution: its frame (states sorted by
-/// id and hashed as the reference hashes them, events sorted) and, if `wanted` asks for
-/// them, its states.
+/// Finishes committed step `t` from every world's contribution ([`super::whole_frame`]) and,
+/// if `wanted` asks for them, clones its sorted states.
 fn finish_frame<M: CellModel>(
     t: Step,
-    mut p: Partial<M::State>,
+    p: Partial<M::State>,
     wanted: &StatesWanted,
 ) -> (Frame, Option<Vec<M::State>>) {
-    // Sorted through (id, state) keys, without moving the states; ids are unique, so an
-    // unstable sort gives the one id order.
-    let mut keyed: Vec<(u64, &M::State)> =
-        p.states.iter().flatten().map(|s| (M::id(s), s)).collect();
-    keyed.sort_unstable_by_key(|k| k.0);
-    p.events.sort();
-    let frame = Frame {
-        step: t,
-        hash: canonical_hash::<M>(keyed.iter().map(|k| k.1)),
-        bodies: keyed.len(),
-        events: p.events,
-    };
+    let (frame, sorted) = super::whole_frame::<M>(t, p.states.iter().flatten(), p.events);
     let states = wanted
         .wants(t, frame.hash)
-        .then(|| keyed.iter().map(|k| k.1.clone()).collect());
+        .then(|| sorted.into_iter().cloned().collect());
     (frame, states)
 }
 
@@ -720,7 +706,6 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         target: F::Atomic::new(epoch_end),
         optimistic: config.mode != crate::kernel::RollbackMode::Conservative,
         lead: config.lead,
-        wanted,
         assembly: F::Mutex::new(Assembly {
             partial: BTreeMap::new(),
             next: 1,
@@ -732,7 +717,6 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     });
     // The output stage: hand committed frames to the sink while the workers run.
     let mut frames = Vec::new();
-    let wanted = shared.wanted.clone();
     let mut deliver = |batch: VecDeque<(Step, Partial<M::State>)>| {
         for (t, partial) in batch {
             let (frame, states) = finish_frame::<M>(t, partial, &wanted);

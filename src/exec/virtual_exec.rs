@@ -49,7 +49,6 @@ use crate::kernel::partition::{Partition, WorldId};
 use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::World;
 use crate::model::{CellModel, Step};
-use crate::state::canonical_hash;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeMap;
@@ -588,29 +587,13 @@ impl<M: CellModel> VirtualRun<M> {
     }
 
     fn frame(&self, t: Step) -> (Frame, Vec<&M::State>) {
-        // Sorted by id through (id, state) pairs: comparisons read the key in place.
-        let mut keyed: Vec<(u64, &M::State)> = self
-            .worlds
-            .iter()
-            .flat_map(|w| w.state_at(t))
-            .map(|s| (M::id(s), s))
-            .collect();
-        keyed.sort_unstable_by_key(|p| p.0);
-        let all: Vec<&M::State> = keyed.into_iter().map(|p| p.1).collect();
-        let mut events: Vec<Event> = self
+        let events: Vec<Event> = self
             .worlds
             .iter()
             .flat_map(|w| w.events_at(t - 1))
             .copied()
             .collect();
-        events.sort();
-        let frame = Frame {
-            step: t,
-            hash: canonical_hash::<M>(all.iter().copied()),
-            bodies: all.len(),
-            events,
-        };
-        (frame, all)
+        super::whole_frame::<M>(t, self.worlds.iter().flat_map(|w| w.state_at(t)), events)
     }
 }
 
