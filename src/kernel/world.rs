@@ -193,9 +193,6 @@ pub struct World<M: CellModel> {
     window: Step,
     bug: PlantedBug,
     ghosts: GhostPolicy,
-    /// Whether ghosts are deltas (optimistic modes with [`GhostPolicy::Delta`]): no ghost
-    /// means unchanged, views are inherited from the step before.
-    delta: bool,
     cells: Vec<u32>,
     targets: Vec<Vec<WorldId>>,
     /// The other worlds owning a cell next to one of its own (ascending): the worlds it
@@ -220,11 +217,6 @@ pub struct World<M: CellModel> {
     ghost_due: BTreeSet<(Step, usize)>,
 }
 
-/// Whether two states are the same bits (`CellModel::same_bits`).
-fn same_state<M: CellModel>(a: &M::State, b: &M::State) -> bool {
-    M::same_bits(a, b)
-}
-
 /// The entities that differ between two id-sorted states of one cell: both versions of an
 /// entity whose bits changed, and every entity present on one side only.
 fn changed_entities<'a, M: CellModel>(
@@ -236,7 +228,7 @@ fn changed_entities<'a, M: CellModel>(
     while i < old.len() || j < new.len() {
         match (old.get(i), new.get(j)) {
             (Some(a), Some(b)) if M::id(a) == M::id(b) => {
-                if !same_state::<M>(a, b) {
+                if !M::same_bits(a, b) {
                     changed.extend([a, b]);
                 }
                 i += 1;
@@ -316,7 +308,6 @@ impl<M: CellModel> World<M> {
             window: config.window.max(1),
             bug: config.planted_bug,
             ghosts: config.ghosts,
-            delta: config.mode != RollbackMode::Conservative && config.ghosts == GhostPolicy::Delta,
             cells,
             targets,
             neighbours,
@@ -404,6 +395,12 @@ impl<M: CellModel> World<M> {
     /// ghosts with, so the only ones whose progress its own computations wait for.
     pub fn neighbours(&self) -> &[WorldId] {
         &self.neighbours
+    }
+
+    /// Whether its ghosts are deltas (optimistic modes with [`GhostPolicy::Delta`]): no
+    /// ghost means unchanged, views are inherited from the step before (K4).
+    fn delta(&self) -> bool {
+        self.mode != RollbackMode::Conservative && self.ghosts == GhostPolicy::Delta
     }
 
     /// Its counters.
@@ -645,7 +642,7 @@ impl<M: CellModel> World<M> {
     pub fn fossil_collect(&mut self, keep_from: Step) {
         // Delta ghosts compare the states two steps before a ghost's step (K4): one more
         // final step is kept.
-        let keep_from = if self.delta {
+        let keep_from = if self.delta() {
             keep_from.saturating_sub(1)
         } else {
             keep_from
@@ -667,7 +664,7 @@ impl<M: CellModel> World<M> {
     fn ensure_slot(&mut self, t: Step) {
         while self.base + (self.slots.len() as Step) <= t {
             let mut slot = Slot::new(self.cells.len());
-            if self.delta {
+            if self.delta() {
                 if let Some(last) = self.slots.back() {
                     slot.ghosts = last.ghosts.clone();
                 }
@@ -743,13 +740,13 @@ impl<M: CellModel> World<M> {
                     && if self.bug == PlantedBug::CutoffByIdsOnly {
                         M::id(&x.1) == M::id(&y.1)
                     } else {
-                        same_state::<M>(&x.1, &y.1)
+                        M::same_bits(&x.1, &y.1)
                     }
             })
     }
 
     fn same_states(a: &[M::State], b: &[M::State]) -> bool {
-        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| same_state::<M>(x, y))
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| M::same_bits(x, y))
     }
 
     /// Sends `(kind, step, cell)` to world `w` with `content` (`None`: no message) and the
@@ -853,7 +850,7 @@ impl<M: CellModel> World<M> {
         let cell = self.cells[x];
         let (send, follows) = if self.mode == RollbackMode::Conservative {
             (true, false)
-        } else if !self.delta {
+        } else if !self.delta() {
             (!self.slots[self.si(t)].states[x].is_empty(), false)
         } else {
             let now = self.changed(x, t);
@@ -987,7 +984,7 @@ impl<M: CellModel> World<M> {
     fn on_state_change(&mut self, d: u32, t: Step, old: Vec<M::State>) -> bool {
         let x = self.part.local(d) as usize;
         self.ghost_due.insert((t, x));
-        if self.delta {
+        if self.delta() {
             // The ghosts of `t + 1` and `t + 2` depend on whether the state changed at `t`
             // and at `t + 1`.
             for u in t + 1..=(t + 2).min(self.head) {
@@ -1049,6 +1046,7 @@ impl<M: CellModel> World<M> {
         if kind == MessageKind::Input {
             return self.apply_input(msg);
         }
+        let delta = self.delta();
         let r = self.slots[i].recv.entry((kind, src)).or_default();
         let before = r.effective().map(|e| e.0);
         let old_cells: Vec<u32> = r
@@ -1086,11 +1084,11 @@ impl<M: CellModel> World<M> {
                     Some(Arc::new(e.1.iter().map(|p| p.1.clone()).collect())),
                     e.2,
                 ),
-                None if i > 0 && self.delta => (self.slots[i - 1].ghosts.get(&src).cloned(), false),
+                None if i > 0 && delta => (self.slots[i - 1].ghosts.get(&src).cloned(), false),
                 None => {
                     // Empty is the view before the origin; a delta ghost's step is always
                     // above `base` otherwise (GVT argument, K7).
-                    debug_assert!(!self.delta || step == self.origin);
+                    debug_assert!(!delta || step == self.origin);
                     (None, false)
                 }
             };
@@ -1146,9 +1144,8 @@ impl<M: CellModel> World<M> {
     /// ghosts, carries it forward to the later steps that inherit it (up to the next step
     /// with an effective ghost of its own) — unless the ghost `follows` (a ghost of `t + 1`
     /// is on its way: the later views are left as they are, as the computations used them,
-    /// until it arrives). At each computed
-    /// step (below the head) whose view changed, the own cells that read the change become
-    /// dirty. Returns the first step made dirty, if any.
+    /// until it arrives). At each computed step (below the head) whose view changed, the own
+    /// cells that read the change become dirty. Returns the first step made dirty, if any.
     fn set_ghost_view(
         &mut self,
         src: u32,
@@ -1156,18 +1153,17 @@ impl<M: CellModel> World<M> {
         view: Option<Arc<Vec<M::State>>>,
         follows: bool,
     ) -> Option<Step> {
+        let carry = self.delta() && !follows;
         let mut first = None;
         let mut u = t;
         while let Some(slot) = self.slots.get_mut((u - self.base) as usize) {
-            if u > t && (!self.delta || follows) {
-                break;
-            }
-            if u > t
-                && slot
-                    .recv
+            // Later steps take the view only if they inherit it: no ghost of their own.
+            let own_ghost = || {
+                slot.recv
                     .get(&(MessageKind::Ghost, src))
                     .is_some_and(|r| r.effective().is_some())
-            {
+            };
+            if u > t && (!carry || own_ghost()) {
                 break;
             }
             let old = match &view {
@@ -1290,11 +1286,10 @@ impl<M: CellModel> World<M> {
         let i = self.si(h);
         let n = self.cells.len();
         // The states at h + 1 are gathered by scattering the outputs (one pass over the
-        // bodies) rather than rebuilt cell by cell from 27 neighbours' outputs; the cells
-        // that also receive early migrations, or any cell when inputs apply at h + 1, take the
-        // general rule
-        // (`rebuild_state`). Either way a state is the id-sorted union (K1).
-        // Sized like the cell's state at h: bodies mostly stay in their cell.
+        // bodies) rather than rebuilt cell by cell from 27 neighbours' outputs; the cells that
+        // also receive early migrations, or any cell when inputs apply at h + 1, take the
+        // general rule (`rebuild_state`). Either way a state is the id-sorted union (K1).
+        // Each is sized like the cell's state at h: bodies mostly stay in their cell.
         let mut fresh: Vec<Vec<M::State>> = self.slots[i]
             .states
             .iter()
@@ -1322,7 +1317,7 @@ impl<M: CellModel> World<M> {
         let part = &*self.part;
         let id = self.id;
         let next = &self.slots[i + 1];
-        let general: BTreeSet<u32> = next
+        let mut general: BTreeSet<u32> = next
             .foreign_in
             .keys()
             .map(|k| k.0)
@@ -1336,7 +1331,6 @@ impl<M: CellModel> World<M> {
         // Inputs at h + 1 (rare) may remove ids from any cell: every cell takes the general
         // rule then.
         let inputs = !next.inputs.is_empty();
-        let mut general = general;
         for (ld, mut v) in fresh.into_iter().enumerate() {
             if !landed[ld] {
                 continue;
