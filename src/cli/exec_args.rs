@@ -121,7 +121,7 @@ pub struct ExecutorArgs {
     /// means empty). Virtual and threaded only; results are bit-identical either way.
     #[arg(long, value_enum, value_name = "POLICY")]
     pub ghosts: Option<GhostsArg>,
-    /// Threaded executor: steps a world may compute ahead of the slowest other world
+    /// Threaded executor: steps a world may compute ahead of its slowest neighbour world
     /// before it lets laggards run first [default: 0, near lockstep]. Larger values let
     /// worlds speculate past slower neighbours (up to the window) at the risk of rollbacks.
     #[arg(long, value_name = "STEPS", value_parser = clap::value_parser!(u64).range(0..=1_000_000))]

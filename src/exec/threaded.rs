@@ -142,8 +142,8 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     /// round's (the worlds stop there so every state at it is final when cells move).
     target: F::Atomic,
     optimistic: bool,
-    /// How many steps a world may compute ahead of the slowest other world before it lets
-    /// laggards run first (optimistic modes; `KernelConfig::lead`).
+    /// How many steps a world may compute ahead of its slowest neighbour world before it
+    /// lets laggards run first (optimistic modes; `KernelConfig::lead`).
     lead: Step,
     assembly: F::Mutex<Assembly<M::State>>,
     out: F::Mutex<Output<M::State>>,
@@ -262,8 +262,8 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// assembly and fossil-collect, act if it wants to, route the output, publish its bound.
     /// Returns whether it acted.
     fn run_world(&self, w: usize, me: usize, times: &mut ThreadTimes) -> bool {
-        // A world another thread is running is not waited for: its task goes back to the
-        // shared queue with its flag still set (so the running thread does not queue a
+        // A world another thread is running is not waited for: its task goes to the
+        // waiting queue with its flag still set (so the running thread does not queue a
         // second copy), and this thread serves another world — e.g. its own, which may
         // speculate ahead (`lead`) instead of blocking until the neighbour's step is done.
         let Some(mut slot) = self.worlds[w].try_lock() else {
@@ -359,7 +359,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// slowest of its neighbour worlds (those it exchanges ghosts with) would compute with
     /// borders that are probably still to change. Worlds that are not neighbours do not hold
     /// it back. The slowest world of the run is never postponed, so the run always
-    /// progresses. Its flag stays set: the task goes back to the shared queue.
+    /// progresses. Its flag stays set: the task goes to the waiting queue.
     fn postpone(&self, w: usize, world: &World<M>) -> bool {
         if !self.optimistic || !world.only_advances() {
             return false;

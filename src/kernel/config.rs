@@ -161,7 +161,7 @@ pub struct KernelConfig {
     #[serde(default)]
     pub balance: BalanceConfig,
     /// Threaded executor, optimistic modes: how many steps a world may compute ahead of the
-    /// slowest other world before it lets laggards run first (SPEC.md §K12). 0 runs the
+    /// slowest of its neighbour worlds before it lets laggards run first (SPEC.md §10). 0 runs the
     /// worlds nearly in lockstep (few rollbacks); more lets a world speculate past a slower
     /// neighbour, up to the window.
     #[serde(default)]
