@@ -590,26 +590,28 @@ fn verify_reports_the_first_divergence_of_a_planted_bug_with_a_command_that_repr
     for word in ["first divergence at step", "body", "field", "reference"] {
         assert!(line.contains(word), "`{word}` missing: {line}");
     }
-    let cmd = out
+    reproduces_a_divergence(&out, &["--scene", "sparse-gas", "--objects", "200"]);
+}
+
+/// The first `reproduce: soda ...` command in a verify report: it must end at the divergent
+/// step with a hash the reference (`soda run` with `scene` and that many steps) does not
+/// have. Returns the command.
+fn reproduces_a_divergence(report: &str, scene: &[&str]) -> String {
+    let cmd = report
         .lines()
         .find_map(|l| l.trim().strip_prefix("reproduce: soda "))
         .expect("a reproduce line");
     let args: Vec<&str> = cmd.split_whitespace().collect();
-    let step: u64 = args[args.iter().position(|a| *a == "--steps").unwrap() + 1]
-        .parse()
-        .unwrap();
-    // The reproducing command ends at the divergent step with a hash the reference does not have.
-    let bad = summary_hash(&ok(&args));
-    let reference = summary_hash(&ok(&[
-        "run",
-        "--scene",
-        "sparse-gas",
-        "--objects",
-        "200",
-        "--steps",
-        &step.to_string(),
-    ]));
-    assert_ne!(bad, reference, "{cmd}");
+    let step = args[args.iter().position(|a| *a == "--steps").unwrap() + 1];
+    let mut reference = vec!["run"];
+    reference.extend_from_slice(scene);
+    reference.extend_from_slice(&["--steps", step]);
+    assert_ne!(
+        summary_hash(&ok(&args)),
+        summary_hash(&ok(&reference)),
+        "{cmd}"
+    );
+    cmd.to_string()
 }
 
 #[test]
@@ -635,23 +637,8 @@ fn verify_checks_full_ghosts_too_and_its_reproduce_command_keeps_the_policy() {
     ]);
     let out = stdout(&o);
     assert_eq!(o.status.code(), Some(1), "{out}");
-    let cmd = out
-        .lines()
-        .find_map(|l| l.trim().strip_prefix("reproduce: soda "))
-        .expect("a reproduce line");
+    let cmd = reproduces_a_divergence(&out, &["--scene", "sparse-gas", "--objects", "200"]);
     assert!(cmd.contains("--ghosts full"), "{cmd}");
-    let args: Vec<&str> = cmd.split_whitespace().collect();
-    let step = args[args.iter().position(|a| *a == "--steps").unwrap() + 1];
-    let reference = summary_hash(&ok(&[
-        "run",
-        "--scene",
-        "sparse-gas",
-        "--objects",
-        "200",
-        "--steps",
-        step,
-    ]));
-    assert_ne!(summary_hash(&ok(&args)), reference, "{cmd}");
     // Without the planted bug both policies commit the reference's bits.
     let o = soda(&[
         "verify",
