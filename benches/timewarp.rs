@@ -15,7 +15,7 @@
 //!    default 2000; `TW_FLAT_STEPS`, default 10000), logs sampled every tenth of the run.
 //!
 //! Sizes (environment): `TW_CUBES` (default 8000) and `TW_STEPS` (60) for 1 and 3;
-//! `TW_GAS` (1000), `TW_FC` (1000) and `TW_GRAN_STEPS` (120) for 2; `TW_LOG_STEPS` (240) for
+//! `TW_GAS` (1000), `TW_FC` (8000, the size the overhead and memory parts use) and `TW_GRAN_STEPS` (120) for 2; `TW_LOG_STEPS` (240) for
 //! 3. `cargo bench --bench timewarp -- --test` (or `cargo test --benches`) runs a tiny
 //! version. Every run checks its final hash against the reference.
 //!
@@ -117,7 +117,7 @@ fn granularity() {
     let steps = env("TW_GRAN_STEPS", 120, 8);
     for (name, n) in [
         ("sparse-gas", env("TW_GAS", 1000, 27)),
-        ("falling-cubes", env("TW_FC", 1000, 27)),
+        ("falling-cubes", env("TW_FC", 8000, 27)),
     ] {
         let scene = builtin(name, Some(n as usize), 0).expect("scene");
         let (tr, hr) = reference(&scene, steps);
