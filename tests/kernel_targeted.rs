@@ -171,7 +171,7 @@ fn settle(w: &mut World<Particles>) -> Vec<Message<Particle>> {
 fn anti_of(m: &Message<Particle>) -> Message<Particle> {
     Message {
         sign: Sign::Anti,
-        bodies: Vec::new(),
+        bodies: Default::default(),
         ..m.clone()
     }
 }

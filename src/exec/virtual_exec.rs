@@ -44,7 +44,7 @@ use crate::kernel::config::RollbackMode;
 use crate::kernel::config::{KernelConfig, ScheduleSpec};
 use crate::kernel::counters::Counters;
 use crate::kernel::gvt::global_virtual_time;
-use crate::kernel::message::{Input, Message, MessageKind, Sign};
+use crate::kernel::message::{Bodies, Input, Message, MessageKind, Sign};
 use crate::kernel::partition::{Partition, WorldId};
 use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::World;
@@ -148,6 +148,9 @@ pub struct VirtualRun<M: CellModel> {
     grid: Arc<Grid>,
     partition: Arc<Partition>,
     worlds: Vec<World<M>>,
+    /// Each world's GVT bound ([`World::bound`]) as of its last change; `None` when it
+    /// acted or received since (recomputed at the next GVT update, not after every turn).
+    bounds: Vec<Option<Step>>,
     pool: Vec<Message<M::State>>,
     in_flight: BTreeMap<Step, usize>,
     chooser: Chooser,
@@ -201,6 +204,7 @@ impl<M: CellModel> VirtualRun<M> {
             grid,
             partition,
             worlds: Vec::new(),
+            bounds: vec![None; worlds.len()],
             pool: Vec::new(),
             in_flight: BTreeMap::new(),
             chooser: Chooser::new(&config.schedule),
@@ -274,7 +278,7 @@ impl<M: CellModel> VirtualRun<M> {
             Input::Remove(id) => (vec![id], Vec::new()),
             Input::Replace(s) => (vec![M::id(&s)], vec![s]),
         };
-        let bodies: Vec<(u32, M::State)> = adds
+        let bodies: Bodies<M::State> = adds
             .into_iter()
             .map(|s| {
                 let c = self
@@ -283,7 +287,8 @@ impl<M: CellModel> VirtualRun<M> {
                     .unwrap_or_else(|| panic!("input entity {} outside the grid", M::id(&s)));
                 (self.grid.index(c) as u32, s)
             })
-            .collect();
+            .collect::<Vec<_>>()
+            .into();
         self.inputs += 1;
         let msgs: Vec<Message<M::State>> = (0..self.worlds.len() as WorldId)
             .map(|w| Message {
@@ -308,6 +313,7 @@ impl<M: CellModel> VirtualRun<M> {
     fn deliver_inputs(&mut self, msgs: Vec<Message<M::State>>) {
         if self.config.mode == RollbackMode::Conservative {
             for m in msgs {
+                self.bounds[m.dst_world as usize] = None;
                 self.worlds[m.dst_world as usize].receive(m);
             }
         } else {
@@ -365,6 +371,7 @@ impl<M: CellModel> VirtualRun<M> {
         );
         if let Some(p) = moved {
             self.partition = p;
+            self.bounds.iter_mut().for_each(|b| *b = None);
             self.pool.clear();
             self.in_flight.clear();
             for w in 0..self.worlds.len() {
@@ -527,6 +534,7 @@ impl<M: CellModel> VirtualRun<M> {
                 self.worlds[acts[i]].trace_time(now);
             }
             let msgs = self.worlds[acts[i]].act(gvt);
+            self.bounds[acts[i]] = None;
             let lead = &mut self.leads[acts[i]];
             lead.0 += self.worlds[acts[i]].lvt().saturating_sub(gvt) as f64;
             lead.1 += 1;
@@ -539,6 +547,7 @@ impl<M: CellModel> VirtualRun<M> {
             if *n == 0 {
                 self.in_flight.remove(&a);
             }
+            self.bounds[m.dst_world as usize] = None;
             self.worlds[m.dst_world as usize].receive(m);
         }
     }
@@ -548,8 +557,18 @@ impl<M: CellModel> VirtualRun<M> {
         wanted: &StatesWanted,
         sink: &mut impl FnMut(Frame, Option<&[&M::State]>),
     ) {
+        for (b, w) in self.bounds.iter_mut().zip(&self.worlds) {
+            if b.is_none() {
+                *b = Some(w.bound());
+            }
+        }
+        debug_assert!(self
+            .bounds
+            .iter()
+            .zip(&self.worlds)
+            .all(|(b, w)| *b == Some(w.bound())));
         let new = global_virtual_time(
-            self.worlds.iter().map(|w| w.bound()),
+            self.bounds.iter().flatten().copied(),
             self.in_flight.keys().next().copied(),
         )
         .unwrap_or(self.end + 1)

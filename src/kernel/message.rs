@@ -10,6 +10,11 @@
 
 use super::partition::WorldId;
 use crate::model::{BodyId, Step};
+use std::sync::Arc;
+
+/// A message's `(home cell, state)` pairs, shared (not copied) between the sender's log of
+/// what it sent, the copies for several destination worlds and the receivers' logs.
+pub type Bodies<S> = Arc<Vec<(u32, S)>>;
 
 /// What a message is about. Inputs sort first so that, at a given step, a world has applied
 /// them before anything can make a state of that step known (conservative mode).
@@ -57,7 +62,7 @@ pub struct Message<S> {
     pub seq: u32,
     /// `(home cell at step, state)` pairs sorted by (cell, id); empty for anti-messages and
     /// null messages. For an input: the states it adds.
-    pub bodies: Vec<(u32, S)>,
+    pub bodies: Bodies<S>,
     /// For an input: the ids of the bodies it removes (empty otherwise).
     pub removes: Vec<BodyId>,
     /// Delta ghosts (SPEC.md §K4): the sender's state of the cell at `step` differs from its

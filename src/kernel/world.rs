@@ -21,7 +21,7 @@
 
 use super::config::{GhostPolicy, KernelConfig, PlantedBug, RollbackMode};
 use super::counters::WorldCounters;
-use super::message::{Message, MessageKey, MessageKind, Sign};
+use super::message::{Bodies, Message, MessageKey, MessageKind, Sign};
 use super::partition::{Partition, WorldId};
 use super::trace::WorldTrace;
 use crate::frame::{Event, EventKind};
@@ -63,7 +63,7 @@ impl<S> Out<S> {
 }
 
 /// One received positive version: (sequence number, bodies, follows).
-type Version<S> = (u32, Vec<(u32, S)>, bool);
+type Version<S> = (u32, Bodies<S>, bool);
 
 /// What a world has received under one identity (kind, step, source cell).
 #[derive(Debug)]
@@ -94,7 +94,7 @@ impl<S> Recv<S> {
 #[derive(Debug)]
 struct Sent<S> {
     seq: u32,
-    live: Option<Vec<(u32, S)>>,
+    live: Option<Bodies<S>>,
     /// The live version's `follows` flag.
     follows: bool,
 }
@@ -105,10 +105,10 @@ struct Slot<S> {
     states: Vec<Vec<S>>,
     outs: Vec<Option<Out<S>>>,
     known: Vec<bool>,
-    /// The view of each foreign neighbour cell at this step (K4: the effective ghost of the
-    /// step, else — optimistic modes — the view of the step before). Shared, not copied,
-    /// between the steps that inherit it.
-    ghosts: BTreeMap<u32, Arc<Vec<S>>>,
+    /// The view of each margin cell (indexed like `World::margin`) at this step (K4: the
+    /// effective ghost of the step, else — optimistic modes — the view of the step before;
+    /// `None`: empty). Shared, not copied, between the steps that inherit it.
+    ghosts: Vec<Option<Arc<Vec<S>>>>,
     ghost_known: BTreeSet<u32>,
     foreign_in: BTreeMap<(u32, u32), Vec<S>>,
     migrate_known: BTreeSet<u32>,
@@ -118,15 +118,16 @@ struct Slot<S> {
 }
 
 /// An input applied to a slot: the ids it removes and the (home cell, state) it adds.
-type InputEntry<S> = (Vec<BodyId>, Vec<(u32, S)>);
+type InputEntry<S> = (Vec<BodyId>, Bodies<S>);
 
 impl<S: Clone> Slot<S> {
-    fn new(n: usize) -> Self {
+    /// An empty slot for `n` own cells and `m` margin cells.
+    fn new(n: usize, m: usize) -> Self {
         Slot {
             states: vec![Vec::new(); n],
             outs: (0..n).map(|_| None).collect(),
             known: vec![false; n],
-            ghosts: BTreeMap::new(),
+            ghosts: vec![None; m],
             ghost_known: BTreeSet::new(),
             foreign_in: BTreeMap::new(),
             migrate_known: BTreeSet::new(),
@@ -147,11 +148,13 @@ impl<S: Clone> Slot<S> {
         for o in self.outs.iter().flatten() {
             b += o.bodies.len() * p + o.events.len() * std::mem::size_of::<Event>();
         }
-        for (src, g) in &self.ghosts {
+        b += self.ghosts.len() * std::mem::size_of::<Option<Arc<Vec<S>>>>();
+        for (k, g) in self.ghosts.iter().enumerate() {
+            let Some(g) = g else { continue };
             let shared = prev
-                .and_then(|p| p.ghosts.get(src))
+                .and_then(|p| p.ghosts[k].as_ref())
                 .is_some_and(|h| Arc::ptr_eq(g, h));
-            b += 16 + if shared { 0 } else { v + g.len() * s };
+            b += if shared { 0 } else { 16 + v + g.len() * s };
         }
         for (removes, adds) in self.inputs.values() {
             b += 8 + removes.len() * 8 + adds.len() * p;
@@ -161,12 +164,15 @@ impl<S: Clone> Slot<S> {
             .values()
             .map(|g| v + 8 + g.len() * s)
             .sum::<usize>();
+        // Message bodies are shared between the sender's log, the messages and the
+        // receivers' logs: each holder counts its share.
+        let share = |l: &Bodies<S>| (v + l.len() * p) / Arc::strong_count(l);
         for r in self.recv.values() {
             b += 16 + r.antis.len() * 4;
-            b += r.positives.iter().map(|x| v + x.1.len() * p).sum::<usize>();
+            b += r.positives.iter().map(|x| 8 + share(&x.1)).sum::<usize>();
         }
         for x in self.sent.values() {
-            b += 24 + x.live.as_ref().map_or(0, |l| l.len() * p);
+            b += 24 + x.live.as_ref().map_or(0, share);
         }
         b + (self.ghost_known.len() + self.migrate_known.len()) * 8
     }
@@ -194,6 +200,10 @@ pub struct World<M: CellModel> {
     bug: PlantedBug,
     ghosts: GhostPolicy,
     cells: Vec<u32>,
+    /// The foreign cells next to an own cell (ascending): the cells whose ghosts it keeps.
+    margin: Vec<u32>,
+    /// Per own cell, its 27-neighbourhood resolved once: where each neighbour's state is.
+    nbrs: Vec<[Nb; 27]>,
     targets: Vec<Vec<WorldId>>,
     /// The other worlds owning a cell next to one of its own (ascending): the worlds it
     /// exchanges ghosts with.
@@ -252,6 +262,17 @@ fn changed_entities<'a, M: CellModel>(
     changed
 }
 
+/// Where the state of one neighbour of an own cell is held.
+#[derive(Clone, Copy, Debug)]
+enum Nb {
+    /// Outside the grid: always empty.
+    Outside,
+    /// An own cell (its local index).
+    Own(u32),
+    /// A margin cell (its index in `World::margin`).
+    Margin(u32),
+}
+
 impl<M: CellModel> World<M> {
     /// World `id` of `part`, starting at step 0 from `initial` (binned over `grid`).
     pub fn new(
@@ -293,7 +314,33 @@ impl<M: CellModel> World<M> {
         let mut neighbours: Vec<WorldId> = targets.iter().flatten().copied().collect();
         neighbours.sort_unstable();
         neighbours.dedup();
-        let mut slot = Slot::new(cells.len());
+        let mut margin: Vec<u32> = cells
+            .iter()
+            .flat_map(|&c| grid.neighbours(grid.coord(c as usize)))
+            .map(|n| grid.index(n) as u32)
+            .filter(|&n| part.owner(n) != id)
+            .collect();
+        margin.sort_unstable();
+        margin.dedup();
+        let nbrs: Vec<[Nb; 27]> = cells
+            .iter()
+            .map(|&cell| {
+                let c = grid.coord(cell as usize);
+                std::array::from_fn(|k| {
+                    let n = c.offset(Neighbourhood::<M::State>::offset(k));
+                    if !grid.contains(n) {
+                        return Nb::Outside;
+                    }
+                    let ni = grid.index(n) as u32;
+                    if part.owner(ni) == id {
+                        Nb::Own(part.local(ni))
+                    } else {
+                        Nb::Margin(margin.binary_search(&ni).expect("a neighbour") as u32)
+                    }
+                })
+            })
+            .collect();
+        let mut slot = Slot::new(cells.len(), margin.len());
         for (x, &c) in cells.iter().enumerate() {
             slot.states[x] = states.cell_at(c as usize).to_vec();
             slot.known[x] = true;
@@ -309,6 +356,8 @@ impl<M: CellModel> World<M> {
             bug: config.planted_bug,
             ghosts: config.ghosts,
             cells,
+            margin,
+            nbrs,
             targets,
             neighbours,
             base: step,
@@ -663,7 +712,7 @@ impl<M: CellModel> World<M> {
     /// views of the step before (K4: no ghost means no change).
     fn ensure_slot(&mut self, t: Step) {
         while self.base + (self.slots.len() as Step) <= t {
-            let mut slot = Slot::new(self.cells.len());
+            let mut slot = Slot::new(self.cells.len(), self.margin.len());
             if self.delta() {
                 if let Some(last) = self.slots.back() {
                     slot.ghosts = last.ghosts.clone();
@@ -677,25 +726,25 @@ impl<M: CellModel> World<M> {
         self.part.owner(cell) == self.id
     }
 
+    /// The index in `margin` of foreign cell `cell`, which must be next to an own cell (a
+    /// ghost comes only from such a cell: its sender targets the owners of its neighbours).
+    fn margin_index(&self, cell: u32) -> usize {
+        self.margin
+            .binary_search(&cell)
+            .unwrap_or_else(|_| panic!("cell {cell} is not next to world {}", self.id))
+    }
+
     /// Computes own cell `x` at step `s` from the states and ghosts held for `s`.
     fn compute(&mut self, x: usize, s: Step) -> Out<M::State> {
         let cell = self.cells[x];
         let grid = &*self.grid;
         let slot = &self.slots[(s - self.base) as usize];
         let c = grid.coord(cell as usize);
-        let id = self.id;
-        let part = &*self.part;
-        let cells: [&[M::State]; 27] = std::array::from_fn(|k| {
-            let n = c.offset(Neighbourhood::<M::State>::offset(k));
-            if !grid.contains(n) {
-                return &[][..];
-            }
-            let ni = grid.index(n) as u32;
-            if part.owner(ni) == id {
-                &slot.states[part.local(ni) as usize][..]
-            } else {
-                slot.ghosts.get(&ni).map_or(&[][..], |v| &v[..])
-            }
+        let nbrs = &self.nbrs[x];
+        let cells: [&[M::State]; 27] = std::array::from_fn(|k| match nbrs[k] {
+            Nb::Outside => &[][..],
+            Nb::Own(l) => &slot.states[l as usize][..],
+            Nb::Margin(m) => slot.ghosts[m as usize].as_ref().map_or(&[][..], |v| &v[..]),
         });
         let nb = Neighbourhood { centre: c, cells };
         let mut events = Vec::new();
@@ -757,7 +806,7 @@ impl<M: CellModel> World<M> {
     fn send(
         &mut self,
         (kind, step, cell, w): (MessageKind, Step, u32, WorldId),
-        content: Option<Vec<(u32, M::State)>>,
+        content: Option<Bodies<M::State>>,
         follows: bool,
         out: &mut Vec<Message<M::State>>,
     ) {
@@ -798,7 +847,7 @@ impl<M: CellModel> World<M> {
         if entry.live.take().is_some() {
             let dropped = bug == PlantedBug::DropLoneAnti && content.is_none();
             if !conservative && !dropped {
-                out.push(msg(Sign::Anti, entry.seq, Vec::new()));
+                out.push(msg(Sign::Anti, entry.seq, Bodies::default()));
                 self.counters.anti_messages_sent += 1;
             }
         }
@@ -857,8 +906,8 @@ impl<M: CellModel> World<M> {
             (now || (t > self.origin && self.changed(x, t - 1)), now)
         };
         let cur = &self.slots[self.si(t)].states[x];
-        let content: Option<Vec<(u32, M::State)>> =
-            send.then(|| cur.iter().map(|b| (cell, b.clone())).collect());
+        let content: Option<Bodies<M::State>> =
+            send.then(|| Arc::new(cur.iter().map(|b| (cell, b.clone())).collect()));
         for k in 0..self.targets[x].len() {
             let w = self.targets[x][k];
             self.send(
@@ -884,8 +933,8 @@ impl<M: CellModel> World<M> {
                     .collect()
             })
             .unwrap_or_default();
-        let content =
-            (self.mode == RollbackMode::Conservative || !content.is_empty()).then_some(content);
+        let content = (self.mode == RollbackMode::Conservative || !content.is_empty())
+            .then(|| Arc::new(content));
         let id = (MessageKind::Migrate, s + 1, self.cells[x], w);
         self.send(id, content, false, out);
     }
@@ -1084,7 +1133,10 @@ impl<M: CellModel> World<M> {
                     Some(Arc::new(e.1.iter().map(|p| p.1.clone()).collect())),
                     e.2,
                 ),
-                None if i > 0 && delta => (self.slots[i - 1].ghosts.get(&src).cloned(), false),
+                None if i > 0 && delta => {
+                    let m = self.margin_index(src);
+                    (self.slots[i - 1].ghosts[m].clone(), false)
+                }
                 None => {
                     // Empty is the view before the origin; a delta ghost's step is always
                     // above `base` otherwise (GVT argument, K7).
@@ -1098,7 +1150,7 @@ impl<M: CellModel> World<M> {
             }
             return dirtied;
         }
-        let new: Vec<(u32, M::State)> = r.effective().map(|e| e.1.clone()).unwrap_or_default();
+        let new: Bodies<M::State> = r.effective().map(|e| e.1.clone()).unwrap_or_default();
         match kind {
             MessageKind::Input => unreachable!("inputs are applied by apply_input"),
             MessageKind::Ghost => unreachable!("ghosts are applied above"),
@@ -1154,6 +1206,7 @@ impl<M: CellModel> World<M> {
         follows: bool,
     ) -> Option<Step> {
         let carry = self.delta() && !follows;
+        let m = self.margin_index(src);
         let mut first = None;
         let mut u = t;
         while let Some(slot) = self.slots.get_mut((u - self.base) as usize) {
@@ -1166,10 +1219,7 @@ impl<M: CellModel> World<M> {
             if u > t && (!carry || own_ghost()) {
                 break;
             }
-            let old = match &view {
-                Some(v) => slot.ghosts.insert(src, v.clone()),
-                None => slot.ghosts.remove(&src),
-            };
+            let old = std::mem::replace(&mut slot.ghosts[m], view.clone());
             let unchanged = match (&old, &view) {
                 (None, None) => true,
                 (Some(a), Some(b)) => Arc::ptr_eq(a, b) || Self::same_states(a, b),
@@ -1381,8 +1431,12 @@ impl<M: CellModel> World<M> {
                     let slot = &mut self.slots[i];
                     slot.ghost_known.insert(src);
                     if !msg.bodies.is_empty() {
-                        let view = msg.bodies.into_iter().map(|p| p.1).collect();
-                        slot.ghosts.insert(src, Arc::new(view));
+                        let view = Arc::unwrap_or_clone(msg.bodies)
+                            .into_iter()
+                            .map(|p| p.1)
+                            .collect();
+                        let m = self.margin_index(src);
+                        self.slots[i].ghosts[m] = Some(Arc::new(view));
                     } else {
                         // An empty cell at `step` migrates nothing at `step + 1`.
                         self.ensure_slot(step + 1);
@@ -1400,7 +1454,7 @@ impl<M: CellModel> World<M> {
                 MessageKind::Migrate => {
                     let slot = &mut self.slots[i];
                     slot.migrate_known.insert(src);
-                    for (d, b) in msg.bodies {
+                    for (d, b) in Arc::unwrap_or_clone(msg.bodies) {
                         slot.foreign_in.entry((d, src)).or_default().push(b);
                     }
                     let grid = self.grid.clone();
