@@ -3,8 +3,9 @@
 //!
 //! 1. **Overhead**: `falling-cubes`, 8 worlds, `cell` mode, window 16, against the reference
 //!    run of the same steps — under the FIFO schedule (deliveries in order, worlds in turn:
-//!    the overhead of logs, messages and GVT alone) and under a seeded random schedule
-//!    (adds the cost of rollbacks).
+//!    the overhead of logs, messages and GVT alone; reference and FIFO runs alternate
+//!    `TW_REPEATS` times, default 5, and their medians are compared) and under a seeded
+//!    random schedule (adds the cost of rollbacks).
 //! 2. **Rollback granularity**: `sparse-gas` and `falling-cubes`, 8 worlds, window 16, the
 //!    same seeded schedule for `cell`, `world` and `conservative`: cell computations,
 //!    re-executions, rollbacks, efficiency and wall time.
@@ -44,6 +45,17 @@ fn env(name: &str, default: u64, quick_value: u64) -> u64 {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(default)
+}
+
+/// The median of `v` (sorted in place).
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
 }
 
 /// Reference wall time and final hash.
@@ -86,13 +98,32 @@ fn config(mode: RollbackMode, window: u64, schedule: ScheduleSpec) -> KernelConf
 fn overhead() {
     let cubes = env("TW_CUBES", 8000, 64) as usize;
     let steps = env("TW_STEPS", 60, 5);
+    let repeats = env("TW_REPEATS", 5, 1).max(1);
     let scene = builtin("falling-cubes", Some(cubes), 0).expect("scene");
-    let (tr, hr) = reference(&scene, steps);
+    // The reference and the FIFO run alternate `repeats` times; their medians are compared.
+    let fifo = config(RollbackMode::Cell, 16, ScheduleSpec::Fifo);
+    let (mut refs, mut fifos) = (Vec::new(), Vec::new());
+    let mut hr = 0;
+    for k in 0..repeats {
+        let (tr, h) = reference(&scene, steps);
+        let (tv, hv, _) = virtual_run(&scene, &fifo, steps);
+        assert_eq!(hv, h, "virtual executor diverged from the reference");
+        println!(
+            "  pair {k}: reference {tr:.3} s, fifo {tv:.3} s = {:.3}x",
+            tv / tr
+        );
+        hr = h;
+        refs.push(tr);
+        fifos.push(tv);
+    }
+    let tr = median(&mut refs);
     println!(
-        "overhead: falling-cubes {cubes}, {steps} steps, grid {:?}; reference {tr:.3} s ({:.0} body-steps/s), hash {}",
+        "overhead: falling-cubes {cubes}, {steps} steps, grid {:?}; reference median of {repeats} {tr:.3} s ({:.0} body-steps/s), hash {}; fifo median {:.3} s = {:.3}x",
         scene.grid().dims,
         cubes as f64 * steps as f64 / tr,
-        hex(hr)
+        hex(hr),
+        median(&mut fifos),
+        median(&mut fifos) / tr,
     );
     for (label, sched) in [
         ("fifo", ScheduleSpec::Fifo),
@@ -101,7 +132,7 @@ fn overhead() {
         let (tv, hv, c) = virtual_run(&scene, &config(RollbackMode::Cell, 16, sched), steps);
         assert_eq!(hv, hr, "virtual executor diverged from the reference");
         println!(
-            "  virtual 8 worlds cell W16 {label:10}: {tv:.3} s = {:.3}x reference; rollbacks {}, cells computed {} (re-executed {}), efficiency {:.3}, messages {} + {} anti",
+            "  virtual 8 worlds cell W16 {label:10}: {tv:.3} s = {:.3}x reference median; rollbacks {}, cells computed {} (re-executed {}), efficiency {:.3}, messages {} + {} anti",
             tv / tr,
             c.total.rollbacks(),
             c.total.cells_computed,
