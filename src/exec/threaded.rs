@@ -1,11 +1,11 @@
-//! The threaded executor: T OS threads run the kernel's worlds as tasks on crossbeam-deque
-//! queues ([`Injector`]s): one per thread, holding the worlds whose *home* is that thread
-//! (the thread that last computed them, so a world's logs stay in one core's cache), and
-//! one shared queue of worlds that had to wait (postponed behind a laggard, or running
-//! elsewhere). A thread takes from its own queue, then steals from the others', then takes
-//! a waiting world. A world runs on at most one thread at a time (its lock); a world that
-//! cannot act (window full, conservative dependency) simply is not rescheduled until a
-//! message or a GVT advance gives it something to do, so its thread serves other worlds.
+//! The threaded executor: T OS threads run the kernel's worlds as tasks. Ready worlds wait
+//! in one shared set ordered critical path first (the laggard first; among worlds at the
+//! same step, the one whose last computation took longest); worlds that had to wait
+//! (postponed behind a laggard, or running elsewhere) go to a crossbeam-deque [`Injector`]
+//! that threads take from when nothing is ready. A world runs on at most one thread at a
+//! time (its lock); a world that cannot act (window full, conservative dependency) simply is
+//! not rescheduled until a message or a GVT advance gives it something to do, so its thread
+//! serves other worlds.
 //!
 //! GVT (SPEC.md §K7, §10) without stopping the world: every world publishes a lower bound of
 //! its `bound()` after each turn, every inbox a lower bound of its messages' `affects`; a
@@ -34,7 +34,8 @@ use crate::kernel::world::{ActionKind, World};
 use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
 use crossbeam_deque::{Injector, Steal};
-use std::collections::{BTreeMap, VecDeque};
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 use std::time::Instant;
@@ -82,7 +83,7 @@ pub struct ThreadTimes {
     pub idle_seconds: f64,
     /// Number of world actions.
     pub actions: u64,
-    /// Tasks taken from another thread's queue.
+    /// Tasks of a world that another thread ran last (migrations between threads).
     pub steals: u64,
 }
 
@@ -114,6 +115,9 @@ const FAILED: u64 = 2;
 /// The `spins` the output stage passes to [`Facade::pause`]: it polls at a slow pace.
 const OUTPUT_PAUSE: u32 = u32::MAX;
 
+/// The order of ready worlds: (published bound, longest last computation first, world).
+type ReadyKey = (Step, Reverse<u64>, usize);
+
 struct Shared<M: CellModel + 'static, F: Facade> {
     worlds: Vec<F::Mutex<Slot<M>>>,
     inboxes: Vec<F::Mutex<Vec<Message<M::State>>>>,
@@ -125,11 +129,13 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     /// GVT reader can tell whether its snapshot is consistent (SPEC.md §K7).
     version: F::Atomic,
     scheduled: Vec<F::Atomic>,
-    /// One queue of world tasks per thread. A world is queued on its *home* thread's queue
-    /// (the thread that last ran an action of it), so it keeps running on the same core
-    /// and its logs stay in that core's cache; an idle thread steals from the others.
-    queues: Vec<Injector<usize>>,
-    /// Per world, its home thread.
+    /// The worlds ready to act, best first ([`ReadyKey`]): the laggard (lowest published
+    /// bound) first and, among worlds at the same step, the one whose last computation took
+    /// longest — the critical path of a near-lockstep run — then by id.
+    ready: F::Mutex<BTreeSet<ReadyKey>>,
+    /// Per world, nanoseconds of its last forward computation (for [`ReadyKey`] only).
+    cost: Vec<F::Atomic>,
+    /// Per world, the thread that last ran an action of it (to count migrations).
     home: Vec<F::Atomic>,
     /// Worlds that had to wait (postponed behind a laggard, or running elsewhere): any
     /// thread takes them, so a waiting world never sits behind a busy thread's work.
@@ -226,10 +232,10 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
     }
 
-    /// Queues world `w` on its home thread's queue (its flag already set).
+    /// Queues world `w` in the ready set (its flag already set).
     fn requeue(&self, w: usize) {
-        let home = self.home[w].load() as usize % self.queues.len();
-        self.queues[home].push(w);
+        let key = (self.published[w].load(), Reverse(self.cost[w].load()), w);
+        self.ready.lock().insert(key);
     }
 
     fn fail(&self, e: ExecError) {
@@ -312,6 +318,9 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             let c0 = thread_cpu_seconds();
             let acted = catch_unwind(AssertUnwindSafe(|| world.act(gvt)));
             let spent = a0.elapsed().as_secs_f64();
+            if kind == ActionKind::Compute {
+                self.cost[w].store((spent * 1e9) as u64);
+            }
             *busy += thread_cpu_seconds() - c0;
             lead.0 += world.lvt().saturating_sub(gvt) as f64;
             lead.1 += 1;
@@ -513,34 +522,21 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         }
     }
 
-    /// The next world task for thread `me`: from its own queue, else stolen from another
-    /// thread's (after `spins` turns in a row that did nothing, the others first, so work
-    /// queued behind a busy thread is taken by the idle one), else a waiting world.
-    fn find_task(&self, me: usize, spins: u32, steals: &mut u64) -> Option<usize> {
-        let n = self.queues.len();
-        let first = if spins > 0 { 1 } else { 0 };
-        loop {
-            let mut retry = false;
-            for k in 0..n {
-                let q = (me + first + k) % n;
-                match self.queues[q].steal() {
-                    Steal::Success(t) => {
-                        *steals += (q != me) as u64;
-                        return Some(t);
-                    }
-                    Steal::Retry => retry = true,
-                    Steal::Empty => {}
-                }
-            }
+    /// The next world task for thread `me`: the best ready world, else a waiting one.
+    /// Counts in `steals` the tasks of worlds another thread ran last.
+    fn find_task(&self, me: usize, steals: &mut u64) -> Option<usize> {
+        let first = self.ready.lock().pop_first().map(|k| k.2);
+        let task = first.or_else(|| loop {
             match self.waiting.steal() {
-                Steal::Success(t) => return Some(t),
-                Steal::Retry => retry = true,
-                Steal::Empty => {}
+                Steal::Success(t) => break Some(t),
+                Steal::Retry => {}
+                Steal::Empty => break None,
             }
-            if !retry {
-                return None;
-            }
+        });
+        if let Some(w) = task {
+            *steals += (self.home[w].load() != me as u64) as u64;
         }
+        task
     }
 
     fn worker_loop(&self, me: usize) {
@@ -548,7 +544,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         let mut spins = 0u32;
         while self.status.load() == RUNNING {
             let t0 = Instant::now();
-            match self.find_task(me, spins, &mut times.steals) {
+            match self.find_task(me, &mut times.steals) {
                 Some(w) => {
                     let acted = self.run_world(w, me, &mut times);
                     if acted {
@@ -694,7 +690,8 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         inbox_min,
         version: F::Atomic::new(0),
         scheduled: (0..n).map(|_| F::Atomic::new(1)).collect(),
-        queues: (0..threads).map(|_| Injector::new()).collect(),
+        ready: F::Mutex::new(BTreeSet::new()),
+        cost: (0..n).map(|_| F::Atomic::new(0)).collect(),
         home: (0..n)
             .map(|w| F::Atomic::new((w % threads) as u64))
             .collect(),
@@ -830,9 +827,8 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
     deliver: &mut impl FnMut(VecDeque<(Step, Partial<M::State>)>),
 ) -> Result<(), ExecError> {
     // Tasks left from an earlier epoch are stale: every world is queued once again.
-    for q in shared.queues.iter().chain([&shared.waiting]) {
-        while !q.steal().is_empty() {}
-    }
+    shared.ready.lock().clear();
+    while !shared.waiting.steal().is_empty() {}
     for w in 0..shared.worlds.len() {
         shared.scheduled[w].store(1);
         shared.requeue(w);
