@@ -3,7 +3,8 @@
 //! famine (SPEC.md §K13).
 
 use super::territory::{
-    border_distance, components, cut_change, face_neighbours, foreign_neighbours, neighbour_worlds,
+    border_distance, cut_change, face_neighbours, foreign_neighbours, neighbour_worlds,
+    removal_keeps_whole,
 };
 use super::{Balancer, LoadLevel};
 use crate::grid::Grid;
@@ -104,9 +105,7 @@ impl<'a> Plan<'a> {
     /// Moving `c` away from its owner keeps the owner's territory in as few pieces and
     /// non-empty.
     fn keeps_owner_whole(&self, c: u32) -> bool {
-        let w = self.owner[c as usize];
-        let before = components(self.grid, &self.owner, w, None);
-        self.cells_of(w) > 1 && components(self.grid, &self.owner, w, Some(c)) <= before.max(1)
+        removal_keeps_whole(self.grid, &self.owner, c)
     }
 
     /// Cession (§3.3.5): every high or overloaded world, most loaded first, gives cells to

@@ -87,6 +87,39 @@ pub fn components(grid: &Grid, owner: &[WorldId], w: WorldId, without: Option<u3
     count
 }
 
+/// Whether giving cell `c` away leaves its owner's territory in no more pieces than before
+/// (and not empty) — the same answer as comparing [`components`] with and without `c`, found
+/// by one search that stops as soon as the owner's face neighbours of `c` are known to stay
+/// connected to each other without `c` (usually a few cells away).
+pub fn removal_keeps_whole(grid: &Grid, owner: &[WorldId], c: u32) -> bool {
+    let w = owner[c as usize];
+    let near: Vec<u32> = face_neighbours(grid, c)
+        .filter(|&n| owner[n as usize] == w)
+        .collect();
+    let Some(&first) = near.first() else {
+        // An isolated piece: removing it leaves one piece fewer, if any cell remains.
+        return owner.iter().filter(|&&o| o == w).nth(1).is_some();
+    };
+    let mut seen = vec![false; owner.len()];
+    seen[c as usize] = true;
+    seen[first as usize] = true;
+    let mut missing = near.len() - 1;
+    let mut queue = VecDeque::from([first]);
+    while let Some(x) = queue.pop_front() {
+        if missing == 0 {
+            return true;
+        }
+        for n in face_neighbours(grid, x) {
+            if owner[n as usize] == w && !seen[n as usize] {
+                seen[n as usize] = true;
+                missing -= near.contains(&n) as usize;
+                queue.push_back(n);
+            }
+        }
+    }
+    missing == 0
+}
+
 /// The worlds owning a cell that shares a face with world `w`'s territory, ascending.
 pub fn neighbour_worlds(grid: &Grid, owner: &[WorldId], w: WorldId) -> Vec<WorldId> {
     let mut out: Vec<WorldId> = (0..owner.len() as u32)
@@ -115,6 +148,26 @@ mod tests {
         assert_eq!(components(&g, &owner, 0, None), 1);
         assert_eq!(components(&g, &owner, 0, Some(1)), 2);
         assert_eq!(components(&g, &owner, 0, Some(0)), 1);
+    }
+
+    #[test]
+    fn removal_keeps_whole_agrees_with_counting_components_on_random_maps() {
+        use rand::{Rng, SeedableRng};
+        let g = Grid::covering(Vec3::zeros(), Vec3::new(6.0, 3.0, 5.0), 1.0);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for _ in 0..200 {
+            let worlds = rng.random_range(1..4u32);
+            let owner: Vec<WorldId> = (0..g.cell_count())
+                .map(|_| rng.random_range(0..worlds))
+                .collect();
+            for c in 0..g.cell_count() as u32 {
+                let w = owner[c as usize];
+                let before = components(&g, &owner, w, None);
+                let cells = owner.iter().filter(|&&o| o == w).count();
+                let expected = cells > 1 && components(&g, &owner, w, Some(c)) <= before.max(1);
+                assert_eq!(removal_keeps_whole(&g, &owner, c), expected, "cell {c}");
+            }
+        }
     }
 
     #[test]
