@@ -15,9 +15,11 @@ use soda::kernel::{
 use soda::Grid;
 
 /// Balancing on, a round every `period` steps, loads drawn from `seed` (random decisions).
+/// Seeded (random) balancing decisions with a round every `period` steps (no backoff).
 fn seeded(period: u64, seed: u64, cooldown: u64, max_cells: usize) -> BalanceConfig {
     BalanceConfig {
         period,
+        backoff: false,
         cooldown,
         max_cells,
         load: LoadSource::Seeded(seed),
@@ -33,11 +35,15 @@ fn balanced_case() -> impl Strategy<Value = (Case, BalanceConfig)> {
         any::<u64>(),
         0u64..3,
         1usize..40,
+        any::<bool>(),
     )
-        .prop_flat_map(|(scene, period, seed, cooldown, max_cells)| {
+        .prop_flat_map(|(scene, period, seed, cooldown, max_cells, backoff)| {
             (
                 case(Just(scene), 8..40),
-                Just(seeded(period, seed, cooldown, max_cells)),
+                Just(BalanceConfig {
+                    backoff,
+                    ..seeded(period, seed, cooldown, max_cells)
+                }),
             )
         })
 }

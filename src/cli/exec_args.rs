@@ -134,6 +134,11 @@ pub struct ExecutorArgs {
     /// Steps between balancing rounds [default: 20].
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     pub balance_period: Option<u64>,
+    /// Back off when balanced [default: on]: after a round that moves no cell the next one
+    /// comes twice as many steps later (at most 4 periods); a round that moves cells brings
+    /// the interval back to --balance-period. `off`: a round every period.
+    #[arg(long, value_enum, value_name = "on|off")]
+    pub balance_backoff: Option<SwitchArg>,
     /// Load level thresholds as fractions of the mean load, `UNDER,HIGH,OVER`
     /// [default: 0.8,1.2,1.5]: below UNDER a world is underloaded, above HIGH highly loaded,
     /// above OVER overloaded.
@@ -163,6 +168,15 @@ pub enum BalanceArg {
     Off,
     /// Move cells between worlds as their loads change.
     On,
+}
+
+/// An on/off switch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SwitchArg {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
 }
 
 /// `--planted-bug` values (hidden).
@@ -197,6 +211,7 @@ impl ExecutorArgs {
             ("--planted-bug", self.planted_bug.is_some()),
             ("--balance", self.balance.is_some()),
             ("--balance-period", self.balance_period.is_some()),
+            ("--balance-backoff", self.balance_backoff.is_some()),
             ("--balance-thresholds", self.balance_thresholds.is_some()),
             ("--balance-smoothing", self.balance_smoothing.is_some()),
             ("--balance-cooldown", self.balance_cooldown.is_some()),
@@ -274,6 +289,7 @@ impl ExecutorArgs {
             ..BalanceConfig::default()
         };
         let tuning = self.balance_period.is_some()
+            || self.balance_backoff.is_some()
             || self.balance_thresholds.is_some()
             || self.balance_smoothing.is_some()
             || self.balance_cooldown.is_some()
@@ -283,6 +299,9 @@ impl ExecutorArgs {
         }
         if let Some(p) = self.balance_period {
             b.period = p;
+        }
+        if let Some(backoff) = self.balance_backoff {
+            b.backoff = backoff == SwitchArg::On;
         }
         if let Some(t) = &self.balance_thresholds {
             let v: Vec<f64> = t

@@ -281,6 +281,9 @@ pub enum LoadSource {
     Seeded(u64),
 }
 
+/// The longest interval between balancing rounds with [`BalanceConfig::backoff`], in periods.
+pub const MAX_BACKOFF: u64 = 4;
+
 /// Dynamic load balancing by cell cession (thesis §3.3; SPEC.md §K13).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -289,6 +292,11 @@ pub struct BalanceConfig {
     pub enabled: bool,
     /// Steps between balancing rounds (each round happens at a committed step).
     pub period: u64,
+    /// Back off when balanced (`--balance-backoff`): after a round that moves no cell the
+    /// next round comes twice as many steps later (at most [`MAX_BACKOFF`] periods); a round
+    /// that moves cells brings the interval back to `period`. Each round is a barrier for
+    /// the threaded executor, so rounds that find nothing to do are not free.
+    pub backoff: bool,
     /// A world whose smoothed load is below this fraction of the mean is underloaded.
     pub underloaded: f64,
     /// Above this multiple of the mean a world is highly loaded (it gives cells to
@@ -322,6 +330,7 @@ impl Default for BalanceConfig {
         BalanceConfig {
             enabled: false,
             period: 20,
+            backoff: true,
             underloaded: 0.8,
             high: 1.2,
             overloaded: 1.5,

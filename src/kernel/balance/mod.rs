@@ -16,7 +16,7 @@
 mod plan;
 pub mod territory;
 
-use super::config::{BalanceConfig, LoadSource};
+use super::config::{BalanceConfig, LoadSource, MAX_BACKOFF};
 use super::counters::BalanceCounters;
 use super::partition::{Partition, WorldId};
 use crate::grid::Grid;
@@ -75,6 +75,8 @@ pub struct Balancer {
     moved_round: Vec<u64>,
     round: u64,
     history: Vec<RoundRecord>,
+    /// Steps from the last round to the next ([`BalanceConfig::backoff`]).
+    interval: u64,
 }
 
 /// `max / mean` of `loads` (1 if the mean is not positive).
@@ -97,6 +99,7 @@ impl Balancer {
             moved_round: vec![u64::MAX; cells],
             round: 0,
             history: Vec::new(),
+            interval: config.period,
         }
     }
 
@@ -107,10 +110,12 @@ impl Balancer {
 
     /// The next committed step at which a round happens after `step`.
     pub fn next_round_after(&self, step: Step) -> Step {
-        if self.config.enabled {
-            (step / self.config.period + 1) * self.config.period
-        } else {
-            Step::MAX
+        if !self.config.enabled {
+            return Step::MAX;
+        }
+        match self.history.last() {
+            Some(last) if self.config.backoff => (last.step + self.interval).max(step + 1),
+            _ => (step / self.config.period + 1) * self.config.period,
         }
     }
 
@@ -226,6 +231,12 @@ impl Balancer {
             owners: owner.clone(),
         });
         self.round += 1;
+        let period = self.config.period;
+        self.interval = if moved > 0 {
+            period
+        } else {
+            (self.interval * 2).min(period * MAX_BACKOFF)
+        };
         (moved > 0).then(|| Partition::from_owners(grid, n, owner))
     }
 }
@@ -292,6 +303,57 @@ mod tests {
         let p2 = b.round(&g, &p1, &[0.0, 4.0], &[0.0; 2], &bodies, 10);
         let moved_back = p2.is_some_and(|p2| p2.owner(3) == 0 || p2.owner(2) == 0);
         assert!(!moved_back, "a cell bounced back during its cooldown");
+    }
+
+    #[test]
+    fn rounds_back_off_while_nothing_moves_and_return_to_the_period_after_a_move() {
+        let (g, p, bodies) = row();
+        let config = BalanceConfig {
+            period: 10,
+            smoothing: 1.0,
+            cooldown: 0,
+            ..BalanceConfig::on()
+        };
+        let mut b = Balancer::new(&config, g.cell_count());
+        assert_eq!(b.next_round_after(0), 10);
+        assert!(b
+            .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, 10)
+            .is_none());
+        assert_eq!(
+            b.next_round_after(10),
+            30,
+            "twice the period after an idle round"
+        );
+        assert!(b
+            .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, 30)
+            .is_none());
+        assert_eq!(b.next_round_after(30), 70);
+        assert!(b
+            .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, 70)
+            .is_none());
+        assert_eq!(b.next_round_after(70), 70 + 10 * MAX_BACKOFF, "capped");
+        let moved = b.round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 110);
+        assert!(moved.is_some(), "an overloaded world gives cells");
+        assert_eq!(
+            b.next_round_after(110),
+            120,
+            "back to the period after a move"
+        );
+        let mut fixed = Balancer::new(
+            &BalanceConfig {
+                backoff: false,
+                ..config
+            },
+            g.cell_count(),
+        );
+        assert!(fixed
+            .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, 10)
+            .is_none());
+        assert_eq!(
+            fixed.next_round_after(10),
+            20,
+            "without backoff: every period"
+        );
     }
 
     #[test]
