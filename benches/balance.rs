@@ -2,7 +2,9 @@
 //! (`BAL_OBJECTS` cubes, default 2000, all in one corner) for `BAL_STEPS` steps (default
 //! 200) with `BAL_WORLDS` worlds (default 8) on `BAL_THREADS` threads (default 2), `cell`
 //! mode, window 16, blocks partition. Runs off and on alternately `BAL_REPEATS` times
-//! (default 3), with the threaded laggard lead `BAL_LEAD` (default 0) and ghost policy `BAL_GHOSTS`
+//! (default 3), with the threaded laggard lead `BAL_LEAD` (default 0), thresholds
+//! `BAL_THRESHOLDS=U,H,O` (default 0.8,1.2,1.5), backoff `BAL_BACKOFF=on|off` (default on)
+//! and ghost policy `BAL_GHOSTS`
 //! (delta or full, default delta), and prints each run's wall time, the medians and their ratio, the run-wide
 //! imbalance (max/mean busy seconds per world) and the balancing counters; every run's
 //! committed hashes must be identical.
@@ -60,10 +62,27 @@ fn main() {
         _ => GhostPolicy::Delta,
     };
     let scene = builtin("skewed", Some(objects), 0).expect("built-in scene");
-    let on = BalanceConfig {
+    let mut on = BalanceConfig {
         period,
         ..BalanceConfig::on()
     };
+    // `BAL_BACKOFF=off` holds a round every period in the timed runs too.
+    on.backoff = std::env::var("BAL_BACKOFF").as_deref() != Ok("off");
+    // `BAL_THRESHOLDS=U,H,O` replaces the load-level thresholds (as `--balance-thresholds`).
+    if let Ok(t) = std::env::var("BAL_THRESHOLDS") {
+        let v: Vec<f64> = t
+            .split(',')
+            .map(|x| {
+                x.trim()
+                    .parse()
+                    .expect("BAL_THRESHOLDS: three numbers U,H,O")
+            })
+            .collect();
+        let [u, h, o] = v[..] else {
+            panic!("BAL_THRESHOLDS: three numbers U,H,O, got `{t}`");
+        };
+        (on.underloaded, on.high, on.overloaded) = (u, h, o);
+    }
     // The runs that chart imbalance over time hold a round every period (no backoff), so
     // both sample the same steps.
     let every_period = BalanceConfig {
