@@ -19,35 +19,14 @@
 //! medians. Run: `cargo bench --bench balance`; `cargo bench --bench balance -- --test` (or
 //! `cargo test --benches`) runs a tiny version.
 
+#[path = "common/knobs.rs"]
+mod knobs;
+
+use knobs::{env, median};
 use soda::exec::threaded::{run_threaded, ThreadedReport};
 use soda::kernel::{BalanceConfig, GhostPolicy, KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
 use std::io::Write;
-
-fn quick() -> bool {
-    let args: Vec<String> = std::env::args().collect();
-    !args.iter().any(|a| a == "--bench") || args.iter().any(|a| a == "--test")
-}
-
-fn env(name: &str, default: u64, quick_value: u64) -> u64 {
-    if quick() {
-        return quick_value;
-    }
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
 
 fn main() {
     let objects = env("BAL_OBJECTS", 2000, 200) as usize;
@@ -142,8 +121,8 @@ fn main() {
             walls[k].push(rep.wall_seconds);
         }
     }
-    let off_m = median(&mut walls[0]);
-    let on_m = median(&mut walls[1]);
+    let off_m = median(&walls[0]);
+    let on_m = median(&walls[1]);
     println!(
         "median wall: off {off_m:.3} s, on {on_m:.3} s, speed-up with balancing {:.2}x",
         off_m / on_m

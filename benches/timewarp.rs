@@ -23,6 +23,10 @@
 //! Run: `cargo bench --bench timewarp` (`TW_PARTS=overhead,granularity,memory,flatness`
 //! selects parts; `TW_GHOSTS=full` runs every part with full instead of delta ghosts).
 
+#[path = "common/knobs.rs"]
+mod knobs;
+
+use knobs::{env, median};
 use soda::exec::virtual_exec::VirtualRun;
 use soda::hash::hex;
 use soda::kernel::synthetic::Particles;
@@ -31,32 +35,6 @@ use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 use soda::ReferenceRun;
 use std::time::Instant;
-
-fn quick() -> bool {
-    let args: Vec<String> = std::env::args().collect();
-    !args.iter().any(|a| a == "--bench") || args.iter().any(|a| a == "--test")
-}
-
-fn env(name: &str, default: u64, quick_value: u64) -> u64 {
-    if quick() {
-        return quick_value;
-    }
-    std::env::var(name)
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
-/// The median of `v` (sorted in place).
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
 
 /// Reference wall time and final hash.
 fn reference(scene: &Scene, steps: u64) -> (f64, u64) {
@@ -103,10 +81,10 @@ fn overhead() {
     // The reference and the FIFO run alternate `repeats` times; their medians are compared.
     let fifo = config(RollbackMode::Cell, 16, ScheduleSpec::Fifo);
     let (mut refs, mut fifos) = (Vec::new(), Vec::new());
-    let mut hr = 0;
+    let (mut hr, mut fifo_counters) = (0, None);
     for k in 0..repeats {
         let (tr, h) = reference(&scene, steps);
-        let (tv, hv, _) = virtual_run(&scene, &fifo, steps);
+        let (tv, hv, c) = virtual_run(&scene, &fifo, steps);
         assert_eq!(hv, h, "virtual executor diverged from the reference");
         println!(
             "  pair {k}: reference {tr:.3} s, fifo {tv:.3} s = {:.3}x",
@@ -115,24 +93,19 @@ fn overhead() {
         hr = h;
         refs.push(tr);
         fifos.push(tv);
+        // The FIFO schedule is deterministic: every pair has the same counters.
+        fifo_counters = Some(c);
     }
-    let tr = median(&mut refs);
+    let tr = median(&refs);
     println!(
-        "overhead: falling-cubes {cubes}, {steps} steps, grid {:?}; reference median of {repeats} {tr:.3} s ({:.0} body-steps/s), hash {}; fifo median {:.3} s = {:.3}x",
+        "overhead: falling-cubes {cubes}, {steps} steps, grid {:?}; reference median of {repeats} {tr:.3} s ({:.0} body-steps/s), hash {}",
         scene.grid().dims,
         cubes as f64 * steps as f64 / tr,
         hex(hr),
-        median(&mut fifos),
-        median(&mut fifos) / tr,
     );
-    for (label, sched) in [
-        ("fifo", ScheduleSpec::Fifo),
-        ("seeded(1)", ScheduleSpec::Seeded(1)),
-    ] {
-        let (tv, hv, c) = virtual_run(&scene, &config(RollbackMode::Cell, 16, sched), steps);
-        assert_eq!(hv, hr, "virtual executor diverged from the reference");
+    let report = |label: &str, tv: f64, c: &Counters| {
         println!(
-            "  virtual 8 worlds cell W16 {label:10}: {tv:.3} s = {:.3}x reference median; rollbacks {}, cells computed {} (re-executed {}), efficiency {:.3}, messages {} + {} anti",
+            "  virtual 8 worlds cell W16 {label:17}: {tv:.3} s = {:.3}x reference median; rollbacks {}, cells computed {} (re-executed {}), efficiency {:.3}, messages {} + {} anti",
             tv / tr,
             c.total.rollbacks(),
             c.total.cells_computed,
@@ -141,7 +114,16 @@ fn overhead() {
             c.total.messages_sent,
             c.total.anti_messages_sent
         );
-    }
+    };
+    report(
+        "fifo (median)",
+        median(&fifos),
+        &fifo_counters.expect("at least one pair"),
+    );
+    let seeded = config(RollbackMode::Cell, 16, ScheduleSpec::Seeded(1));
+    let (tv, hv, c) = virtual_run(&scene, &seeded, steps);
+    assert_eq!(hv, hr, "virtual executor diverged from the reference");
+    report("seeded(1)", tv, &c);
 }
 
 fn granularity() {

@@ -24,12 +24,16 @@
 //! `SODA_BENCH_STEPS` replaces the 600 steps (e.g. 3600 for 60 simulated seconds).
 
 mod common;
+#[path = "common/knobs.rs"]
+#[allow(dead_code)]
+mod knobs;
 #[path = "common/rapier_world.rs"]
 mod rapier_world;
 
 use rapier_world::RapierWorld;
 
 use common::{measure_pile, soda_pile, Footprint, PileBody, PileMetrics};
+use knobs::median;
 use serde::Serialize;
 use soda::frame::EventKind;
 use soda::physics::Body;
@@ -198,17 +202,6 @@ fn run_rapier(
         hash: world.hash(),
         pile: world.pile(initial),
         extra: Extra::Rapier { asleep },
-    }
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    let m = s.len() / 2;
-    if s.len() % 2 == 1 {
-        s[m]
-    } else {
-        (s[m - 1] + s[m]) / 2.0
     }
 }
 

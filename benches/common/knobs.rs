@@ -1,0 +1,32 @@
+//! Shared by the benches that take their sizes from the environment: whether the run is the
+//! tiny `--test` version, numeric knobs, and medians of repeated wall times.
+
+/// Whether this is the tiny version (`cargo test --benches`, or `-- --test`).
+pub fn quick() -> bool {
+    let args: Vec<String> = std::env::args().collect();
+    !args.iter().any(|a| a == "--bench") || args.iter().any(|a| a == "--test")
+}
+
+/// The numeric knob `name` from the environment (`default` if unset or unreadable), or
+/// `quick_value` in the tiny version.
+pub fn env(name: &str, default: u64, quick_value: u64) -> u64 {
+    if quick() {
+        return quick_value;
+    }
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+/// The median of `v` (the mean of the middle two for an even count).
+pub fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let m = s.len() / 2;
+    if s.len() % 2 == 1 {
+        s[m]
+    } else {
+        (s[m - 1] + s[m]) / 2.0
+    }
+}
