@@ -314,24 +314,19 @@ mod tests {
             cooldown: 0,
             ..BalanceConfig::on()
         };
+        // A round with equal loads moves nothing; returns the next round's step.
+        let idle = |b: &mut Balancer, step: Step| {
+            assert!(b
+                .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, step)
+                .is_none());
+            b.next_round_after(step)
+        };
         let mut b = Balancer::new(&config, g.cell_count());
         assert_eq!(b.next_round_after(0), 10);
-        assert!(b
-            .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, 10)
-            .is_none());
-        assert_eq!(
-            b.next_round_after(10),
-            30,
-            "twice the period after an idle round"
-        );
-        assert!(b
-            .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, 30)
-            .is_none());
-        assert_eq!(b.next_round_after(30), 70);
-        assert!(b
-            .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, 70)
-            .is_none());
-        assert_eq!(b.next_round_after(70), 70 + 10 * MAX_BACKOFF, "capped");
+        // The interval doubles after each idle round (20, 40), then stays at the cap.
+        assert_eq!(idle(&mut b, 10), 30);
+        assert_eq!(idle(&mut b, 30), 70);
+        assert_eq!(idle(&mut b, 70), 70 + 10 * MAX_BACKOFF, "capped");
         let moved = b.round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 110);
         assert!(moved.is_some(), "an overloaded world gives cells");
         assert_eq!(
@@ -339,21 +334,12 @@ mod tests {
             120,
             "back to the period after a move"
         );
-        let mut fixed = Balancer::new(
-            &BalanceConfig {
-                backoff: false,
-                ..config
-            },
-            g.cell_count(),
-        );
-        assert!(fixed
-            .round(&g, &p, &[1.0, 1.0], &[0.0; 2], &bodies, 10)
-            .is_none());
-        assert_eq!(
-            fixed.next_round_after(10),
-            20,
-            "without backoff: every period"
-        );
+        let fixed = BalanceConfig {
+            backoff: false,
+            ..config
+        };
+        let mut fixed = Balancer::new(&fixed, g.cell_count());
+        assert_eq!(idle(&mut fixed, 10), 20, "without backoff: every period");
     }
 
     #[test]
