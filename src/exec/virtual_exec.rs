@@ -313,8 +313,7 @@ impl<M: CellModel> VirtualRun<M> {
     fn deliver_inputs(&mut self, msgs: Vec<Message<M::State>>) {
         if self.config.mode == RollbackMode::Conservative {
             for m in msgs {
-                self.bounds[m.dst_world as usize] = None;
-                self.worlds[m.dst_world as usize].receive(m);
+                self.changing(m.dst_world as usize).receive(m);
             }
         } else {
             self.post(msgs);
@@ -533,8 +532,7 @@ impl<M: CellModel> VirtualRun<M> {
                 let now = self.started.elapsed().as_secs_f64();
                 self.worlds[acts[i]].trace_time(now);
             }
-            let msgs = self.worlds[acts[i]].act(gvt);
-            self.bounds[acts[i]] = None;
+            let msgs = self.changing(acts[i]).act(gvt);
             let lead = &mut self.leads[acts[i]];
             lead.0 += self.worlds[acts[i]].lvt().saturating_sub(gvt) as f64;
             lead.1 += 1;
@@ -547,9 +545,14 @@ impl<M: CellModel> VirtualRun<M> {
             if *n == 0 {
                 self.in_flight.remove(&a);
             }
-            self.bounds[m.dst_world as usize] = None;
-            self.worlds[m.dst_world as usize].receive(m);
+            self.changing(m.dst_world as usize).receive(m);
         }
+    }
+
+    /// World `w`, about to act or receive: its cached GVT bound is dropped.
+    fn changing(&mut self, w: usize) -> &mut World<M> {
+        self.bounds[w] = None;
+        &mut self.worlds[w]
     }
 
     fn update_gvt(
