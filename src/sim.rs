@@ -134,7 +134,7 @@ pub enum ExecutorKind {
     Reference,
     /// One thread runs the worlds under a seeded, replayable schedule.
     Virtual,
-    /// OS threads run the worlds as tasks on crossbeam-deque work stealing.
+    /// OS threads run the worlds as tasks, the laggard (at equal step the heaviest) first.
     Threaded,
 }
 

@@ -16,7 +16,7 @@ pub enum ExecutorArg {
     Reference,
     /// One thread runs the worlds under a seeded, replayable schedule.
     Virtual,
-    /// OS threads run the worlds on work stealing.
+    /// OS threads run the worlds, the laggard (at equal step the heaviest) first.
     Threaded,
 }
 
