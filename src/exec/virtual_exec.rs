@@ -51,7 +51,7 @@ use crate::kernel::world::World;
 use crate::model::{CellModel, Step};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 
 /// Prefix of schedule strings.
@@ -151,7 +151,9 @@ pub struct VirtualRun<M: CellModel> {
     /// Each world's GVT bound ([`World::bound`]) as of its last change; `None` when it
     /// acted or received since (recomputed at the next GVT update, not after every turn).
     bounds: Vec<Option<Step>>,
-    pool: Vec<Message<M::State>>,
+    /// Messages in flight, oldest first. A deque: FIFO and the seeded schedules take
+    /// messages mostly from the front, which a `Vec` paid for by shifting the whole pool.
+    pool: VecDeque<Message<M::State>>,
     in_flight: BTreeMap<Step, usize>,
     chooser: Chooser,
     record: bool,
@@ -205,7 +207,7 @@ impl<M: CellModel> VirtualRun<M> {
             partition,
             worlds: Vec::new(),
             bounds: vec![None; worlds.len()],
-            pool: Vec::new(),
+            pool: VecDeque::new(),
             in_flight: BTreeMap::new(),
             chooser: Chooser::new(&config.schedule),
             record: config.record_schedule,
@@ -250,7 +252,7 @@ impl<M: CellModel> VirtualRun<M> {
     fn post(&mut self, msgs: Vec<Message<M::State>>) {
         for m in msgs {
             *self.in_flight.entry(m.affects()).or_default() += 1;
-            self.pool.push(m);
+            self.pool.push_back(m);
         }
     }
 
@@ -538,7 +540,10 @@ impl<M: CellModel> VirtualRun<M> {
             lead.1 += 1;
             self.post(msgs);
         } else {
-            let m = self.pool.remove(i - acts.len());
+            let m = self
+                .pool
+                .remove(i - acts.len())
+                .expect("the chooser picks a message in the pool");
             let a = m.affects();
             let n = self.in_flight.get_mut(&a).expect("counted in flight");
             *n -= 1;
