@@ -27,6 +27,7 @@
 mod knobs;
 
 use knobs::{env, median};
+use soda::exec::clock::thread_cpu_seconds;
 use soda::exec::virtual_exec::VirtualRun;
 use soda::hash::hex;
 use soda::kernel::synthetic::Particles;
@@ -36,24 +37,29 @@ use soda::scene::Scene;
 use soda::ReferenceRun;
 use std::time::Instant;
 
-/// Reference wall time and final hash.
-fn reference(scene: &Scene, steps: u64) -> (f64, u64) {
+/// Reference wall time, CPU time (the thread's clock) and final hash.
+fn reference(scene: &Scene, steps: u64) -> (f64, f64, u64) {
     let (mut r, _) = ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
-    let t = Instant::now();
+    let (t, c) = (Instant::now(), thread_cpu_seconds());
     let mut hash = 0;
     for _ in 0..steps {
         hash = r.advance().hash;
     }
-    (t.elapsed().as_secs_f64(), hash)
+    (t.elapsed().as_secs_f64(), thread_cpu_seconds() - c, hash)
 }
 
-/// Virtual-executor wall time, final hash and counters.
-fn virtual_run(scene: &Scene, cfg: &KernelConfig, steps: u64) -> (f64, u64, Counters) {
+/// Virtual-executor wall time, CPU time (the thread's clock), final hash and counters.
+fn virtual_run(scene: &Scene, cfg: &KernelConfig, steps: u64) -> (f64, f64, u64, Counters) {
     let (mut r, _) = VirtualRun::new(scene.model(), scene.grid(), scene.initial_bodies(), cfg);
-    let t = Instant::now();
+    let (t, c) = (Instant::now(), thread_cpu_seconds());
     let mut hash = 0;
     r.run_with(steps, |f| hash = f.hash);
-    (t.elapsed().as_secs_f64(), hash, r.counters())
+    (
+        t.elapsed().as_secs_f64(),
+        thread_cpu_seconds() - c,
+        hash,
+        r.counters(),
+    )
 }
 
 /// The ghost policy (`TW_GHOSTS=delta|full`, default delta).
@@ -81,18 +87,22 @@ fn overhead() {
     // The reference and the FIFO run alternate `repeats` times; their medians are compared.
     let fifo = config(RollbackMode::Cell, 16, ScheduleSpec::Fifo);
     let (mut refs, mut fifos) = (Vec::new(), Vec::new());
+    let (mut ref_cpu, mut fifo_cpu) = (Vec::new(), Vec::new());
     let (mut hr, mut fifo_counters) = (0, None);
     for k in 0..repeats {
-        let (tr, h) = reference(&scene, steps);
-        let (tv, hv, c) = virtual_run(&scene, &fifo, steps);
+        let (tr, cr, h) = reference(&scene, steps);
+        let (tv, cv, hv, c) = virtual_run(&scene, &fifo, steps);
         assert_eq!(hv, h, "virtual executor diverged from the reference");
         println!(
-            "  pair {k}: reference {tr:.3} s, fifo {tv:.3} s = {:.3}x",
-            tv / tr
+            "  pair {k}: reference {tr:.3} s, fifo {tv:.3} s = {:.3}x; CPU {cr:.3} s, {cv:.3} s = {:.3}x",
+            tv / tr,
+            cv / cr
         );
         hr = h;
         refs.push(tr);
         fifos.push(tv);
+        ref_cpu.push(cr);
+        fifo_cpu.push(cv);
         // The FIFO schedule is deterministic: every pair has the same counters.
         fifo_counters = Some(c);
     }
@@ -120,8 +130,14 @@ fn overhead() {
         median(&fifos),
         &fifo_counters.expect("at least one pair"),
     );
+    println!(
+        "  CPU time (thread clock, medians): reference {:.3} s, fifo {:.3} s = {:.3}x",
+        median(&ref_cpu),
+        median(&fifo_cpu),
+        median(&fifo_cpu) / median(&ref_cpu)
+    );
     let seeded = config(RollbackMode::Cell, 16, ScheduleSpec::Seeded(1));
-    let (tv, hv, c) = virtual_run(&scene, &seeded, steps);
+    let (tv, _, hv, c) = virtual_run(&scene, &seeded, steps);
     assert_eq!(hv, hr, "virtual executor diverged from the reference");
     report("seeded(1)", tv, &c);
 }
@@ -133,7 +149,7 @@ fn granularity() {
         ("falling-cubes", env("TW_FC", 8000, 27)),
     ] {
         let scene = builtin(name, Some(n as usize), 0).expect("scene");
-        let (tr, hr) = reference(&scene, steps);
+        let (tr, _, hr) = reference(&scene, steps);
         println!(
             "granularity: {name} {n}, {steps} steps, 8 worlds, W16, schedule seeded(3); reference {tr:.3} s"
         );
@@ -143,7 +159,7 @@ fn granularity() {
             RollbackMode::World,
             RollbackMode::Conservative,
         ] {
-            let (tv, hv, c) =
+            let (tv, _, hv, c) =
                 virtual_run(&scene, &config(mode, 16, ScheduleSpec::Seeded(3)), steps);
             assert_eq!(hv, hr, "{name} {mode:?} diverged from the reference");
             recomputed.push(c.total.cells_recomputed);

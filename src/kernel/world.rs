@@ -180,7 +180,7 @@ impl<S: Clone> Slot<S> {
 
 /// [`World::sample_log_bytes`] measures the logs at every this many calls (and when they
 /// hold more steps than ever before).
-const LOG_SAMPLE_EVERY: u64 = 4;
+const LOG_SAMPLE_EVERY: u64 = 16;
 
 /// The kinds of a world's actions (SPEC.md §K5), for time accounting.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
