@@ -154,6 +154,8 @@ pub struct VirtualRun<M: CellModel> {
     /// Messages in flight, oldest first. A deque: FIFO and the seeded schedules take
     /// messages mostly from the front, which a `Vec` paid for by shifting the whole pool.
     pool: VecDeque<Message<M::State>>,
+    /// Scratch for `decide`: the worlds that may act this turn.
+    acts: Vec<usize>,
     in_flight: BTreeMap<Step, usize>,
     chooser: Chooser,
     record: bool,
@@ -208,6 +210,7 @@ impl<M: CellModel> VirtualRun<M> {
             worlds: Vec::new(),
             bounds: vec![None; worlds.len()],
             pool: VecDeque::new(),
+            acts: Vec::new(),
             in_flight: BTreeMap::new(),
             chooser: Chooser::new(&config.schedule),
             record: config.record_schedule,
@@ -511,9 +514,10 @@ impl<M: CellModel> VirtualRun<M> {
 
     fn decide(&mut self) {
         let gvt = self.gvt;
-        let acts: Vec<usize> = (0..self.worlds.len())
-            .filter(|&w| self.worlds[w].wants_to_act(gvt))
-            .collect();
+        // The worlds that may act, in a buffer kept between decisions (one per turn).
+        let mut acts = std::mem::take(&mut self.acts);
+        acts.clear();
+        acts.extend((0..self.worlds.len()).filter(|&w| self.worlds[w].wants_to_act(gvt)));
         assert!(
             !acts.is_empty() || !self.pool.is_empty(),
             "kernel deadlock at GVT {gvt}: no world can act and no message is in flight"
@@ -552,6 +556,7 @@ impl<M: CellModel> VirtualRun<M> {
             }
             self.changing(m.dst_world as usize).receive(m);
         }
+        self.acts = acts;
     }
 
     /// World `w`, about to act or receive: its cached GVT bound is dropped.

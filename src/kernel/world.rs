@@ -1121,10 +1121,11 @@ impl<M: CellModel> World<M> {
         let delta = self.delta();
         let r = self.slots[i].recv.entry((kind, src)).or_default();
         let before = r.effective().map(|e| e.0);
-        let old_cells: Vec<u32> = r
-            .effective()
-            .map(|e| e.1.iter().map(|p| p.0).collect())
-            .unwrap_or_default();
+        // The cells the effective migration landed in (ghosts do not need them).
+        let old_cells: Vec<u32> = match r.effective() {
+            Some(e) if kind == MessageKind::Migrate => e.1.iter().map(|p| p.0).collect(),
+            _ => Vec::new(),
+        };
         match msg.sign {
             Sign::Positive => {
                 if let Some(k) = r.antis.iter().position(|&a| a == msg.seq) {
