@@ -31,34 +31,72 @@ use crate::state::CellStates;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
 
-/// The output of one cell computation: the bodies it homes at the next step, as
-/// `(home cell, state)` sorted by (cell, id), and the events it raised.
+/// Id-sorted states in one shared allocation (`None`: empty, nothing allocated). A cell's
+/// output and its state at the next step are the same allocation when every body stays in
+/// the cell and nothing else lands there — the common case, which then copies nothing.
+type Shared<S> = Option<Arc<[S]>>;
+
+/// The states of `s` as a slice.
+fn view<S>(s: &Shared<S>) -> &[S] {
+    s.as_deref().unwrap_or(&[])
+}
+
+/// `v` as shared states (`None` when empty).
+fn share<S>(v: Vec<S>) -> Shared<S> {
+    (!v.is_empty()).then(|| Arc::from(v))
+}
+
+/// The output of one cell computation: the bodies it homes at the next step, sorted by
+/// (home cell, id), their home cells, and the events it raised.
 #[derive(Clone, Debug)]
 struct Out<S> {
-    bodies: Vec<(u32, S)>,
+    /// The cell computed.
+    cell: u32,
+    bodies: Shared<S>,
+    /// The home cell of each of `bodies`; empty exactly when every body stays in `cell`.
+    homes: Vec<u32>,
     events: Vec<Event>,
     /// Whether a cell computation produced it (an empty cell's output is not computed).
     computed: bool,
 }
 
 impl<S> Out<S> {
-    fn empty() -> Self {
+    fn empty(cell: u32) -> Self {
         Out {
-            bodies: Vec::new(),
+            cell,
+            bodies: None,
+            homes: Vec::new(),
             events: Vec::new(),
             computed: false,
         }
     }
 
     fn is_empty(&self) -> bool {
-        self.bodies.is_empty() && self.events.is_empty()
+        self.bodies.is_none() && self.events.is_empty()
+    }
+
+    /// Whether every body it homes stays in the cell computed.
+    fn stays(&self) -> bool {
+        self.homes.is_empty()
+    }
+
+    /// `(home cell, state)` of every body, sorted by (cell, id).
+    fn pairs(&self) -> impl Iterator<Item = (u32, &S)> + '_ {
+        view(&self.bodies)
+            .iter()
+            .enumerate()
+            .map(|(k, b)| (self.homes.get(k).copied().unwrap_or(self.cell), b))
     }
 
     /// The bodies homed in `cell`.
-    fn landing_in(&self, cell: u32) -> &[(u32, S)] {
-        let lo = self.bodies.partition_point(|(c, _)| *c < cell);
-        let hi = self.bodies.partition_point(|(c, _)| *c <= cell);
-        &self.bodies[lo..hi]
+    fn landing_in(&self, cell: u32) -> &[S] {
+        let all = view(&self.bodies);
+        if self.stays() {
+            return if cell == self.cell { all } else { &[] };
+        }
+        let lo = self.homes.partition_point(|c| *c < cell);
+        let hi = self.homes.partition_point(|c| *c <= cell);
+        &all[lo..hi]
     }
 }
 
@@ -102,7 +140,7 @@ struct Sent<S> {
 /// Everything a world holds about one step.
 #[derive(Debug)]
 struct Slot<S> {
-    states: Vec<Vec<S>>,
+    states: Vec<Shared<S>>,
     outs: Vec<Option<Out<S>>>,
     known: Vec<bool>,
     /// The view of each margin cell (indexed like `World::margin`) at this step (K4: the
@@ -121,10 +159,15 @@ struct Slot<S> {
 type InputEntry<S> = (Vec<BodyId>, Bodies<S>);
 
 impl<S: Clone> Slot<S> {
+    /// The state of own cell `x` (index in `World::cells`).
+    fn state(&self, x: usize) -> &[S] {
+        view(&self.states[x])
+    }
+
     /// An empty slot for `n` own cells and `m` margin cells.
     fn new(n: usize, m: usize) -> Self {
         Slot {
-            states: vec![Vec::new(); n],
+            states: vec![None; n],
             outs: (0..n).map(|_| None).collect(),
             known: vec![false; n],
             ghosts: vec![None; m],
@@ -143,10 +186,15 @@ impl<S: Clone> Slot<S> {
         let s = std::mem::size_of::<S>();
         let p = std::mem::size_of::<(u32, S)>();
         let v = std::mem::size_of::<Vec<S>>();
-        let mut b = self.states.len() * (v + std::mem::size_of::<Option<Out<S>>>() + 1);
-        b += self.states.iter().map(|c| c.len() * s).sum::<usize>();
+        let h = std::mem::size_of::<Shared<S>>();
+        let mut b = self.states.len() * (h + std::mem::size_of::<Option<Out<S>>>() + 1);
+        // A cell's states shared by its output and the next step's state count half at each.
+        let held = |a: &Arc<[S]>| (16 + a.len() * s) / Arc::strong_count(a);
+        b += self.states.iter().flatten().map(held).sum::<usize>();
         for o in self.outs.iter().flatten() {
-            b += o.bodies.len() * p + o.events.len() * std::mem::size_of::<Event>();
+            b += o.bodies.as_ref().map_or(0, held)
+                + o.homes.len() * 4
+                + o.events.len() * std::mem::size_of::<Event>();
         }
         b += self.ghosts.len() * std::mem::size_of::<Option<Arc<Vec<S>>>>();
         for (k, g) in self.ghosts.iter().enumerate() {
@@ -228,6 +276,8 @@ pub struct World<M: CellModel> {
     log_samples: u64,
     most_held: u64,
     scratch: Vec<M::State>,
+    /// Scratch for `compute`: the home cell of each body it produced.
+    homes_scratch: Vec<u32>,
     record: Option<WorldTrace>,
     /// The step the world started from (0, or its last reterritory): ghosts of this step
     /// carry the whole state; later ones only changes (K4, delta ghosts).
@@ -351,7 +401,7 @@ impl<M: CellModel> World<M> {
             .collect();
         let mut slot = Slot::new(cells.len(), margin.len());
         for (x, &c) in cells.iter().enumerate() {
-            slot.states[x] = states.cell_at(c as usize).to_vec();
+            slot.states[x] = share(states.cell_at(c as usize).to_vec());
             slot.known[x] = true;
         }
         let n = cells.len();
@@ -382,6 +432,7 @@ impl<M: CellModel> World<M> {
             log_samples: 0,
             most_held: 0,
             scratch: Vec::new(),
+            homes_scratch: Vec::new(),
             record: None,
             origin: step,
             ghost_due: BTreeSet::new(),
@@ -640,7 +691,7 @@ impl<M: CellModel> World<M> {
     pub fn state_at(&self, t: Step) -> impl Iterator<Item = &M::State> + '_ {
         self.slot(t)
             .into_iter()
-            .flat_map(|s| s.states.iter().flatten())
+            .flat_map(|s| s.states.iter().flat_map(view))
     }
 
     /// Its view of the state of own cell `cell` at step `t`, if held.
@@ -649,7 +700,7 @@ impl<M: CellModel> World<M> {
             return None;
         }
         self.slot(t)
-            .map(|s| &s.states[self.part.local(cell) as usize][..])
+            .map(|s| s.state(self.part.local(cell) as usize))
     }
 
     fn slot(&self, t: Step) -> Option<&Slot<M::State>> {
@@ -670,7 +721,7 @@ impl<M: CellModel> World<M> {
         self.counters.steps_committed += 1;
         if let Some(slot) = t.checked_sub(1).and_then(|p| self.slot(p)) {
             self.counters.cells_committed +=
-                slot.states.iter().filter(|c| !c.is_empty()).count() as u64;
+                slot.states.iter().filter(|c| c.is_some()).count() as u64;
         }
     }
 
@@ -763,7 +814,7 @@ impl<M: CellModel> World<M> {
         let nbrs = &self.nbrs[x];
         let cells: [&[M::State]; 27] = std::array::from_fn(|k| match nbrs[k] {
             Nb::Outside => &[][..],
-            Nb::Own(l) => &slot.states[l as usize][..],
+            Nb::Own(l) => slot.state(l as usize),
             Nb::Margin(m) => slot.ghosts[m as usize].as_ref().map_or(&[][..], |v| &v[..]),
         });
         let nb = Neighbourhood { centre: c, cells };
@@ -771,38 +822,80 @@ impl<M: CellModel> World<M> {
         self.scratch.clear();
         self.model
             .step_cell(s, grid, &nb, &mut self.scratch, &mut events);
-        let mut bodies = Vec::with_capacity(self.scratch.len());
-        for b in self.scratch.drain(..) {
-            match grid.cell_of(M::position(&b)) {
+        if !self.scratch.is_sorted_by_key(|b| M::id(b)) {
+            self.scratch.sort_by_key(|b| M::id(b));
+        }
+        // Each body's home cell at s + 1 (`u32::MAX`: it left the domain).
+        let homes = &mut self.homes_scratch;
+        homes.clear();
+        let mut stays = true;
+        for b in &self.scratch {
+            match grid.cell_of(M::position(b)) {
                 Some(d) => {
                     assert!(
                         d.chebyshev(c) <= 1,
                         "locality contract violated: body {} moved from cell {c:?} to {d:?} in one step",
-                        M::id(&b)
+                        M::id(b)
                     );
-                    bodies.push((grid.index(d) as u32, b));
+                    let d = grid.index(d) as u32;
+                    stays &= d == cell;
+                    homes.push(d);
                 }
-                None => events.push(Event {
-                    step: s,
-                    body: M::id(&b),
-                    kind: EventKind::LeftDomain,
-                }),
+                None => {
+                    stays = false;
+                    homes.push(u32::MAX);
+                    events.push(Event {
+                        step: s,
+                        body: M::id(b),
+                        kind: EventKind::LeftDomain,
+                    });
+                }
             }
         }
-        // Outputs come in id order and mostly stay in their cell: usually already sorted.
-        if !bodies.is_sorted_by_key(|(d, b)| (*d, M::id(b))) {
-            bodies.sort_by_key(|(d, b)| (*d, M::id(b)));
-        }
         self.counters.cells_computed += 1;
+        if stays {
+            // The common case: one allocation, written once, shared with the next state.
+            let bodies = (!self.scratch.is_empty()).then(|| self.scratch.drain(..).collect());
+            return Out {
+                cell,
+                bodies,
+                homes: Vec::new(),
+                events,
+                computed: true,
+            };
+        }
+        // Sorted by (home cell, id), without the bodies that left the domain.
+        let mut order: Vec<usize> = (0..homes.len()).filter(|&k| homes[k] != u32::MAX).collect();
+        let scratch = &self.scratch;
+        order.sort_by_key(|&k| (homes[k], M::id(&scratch[k])));
+        let mut out_homes: Vec<u32> = order.iter().map(|&k| homes[k]).collect();
+        if out_homes.iter().all(|&d| d == cell) {
+            out_homes.clear();
+        }
+        let bodies =
+            (!order.is_empty()).then(|| order.iter().map(|&k| scratch[k].clone()).collect());
+        self.scratch.clear();
         Out {
+            cell,
             bodies,
+            homes: out_homes,
             events,
             computed: true,
         }
     }
 
     fn same_out(&self, a: &Out<M::State>, b: &Out<M::State>) -> bool {
-        a.events == b.events && self.same_pairs(&a.bodies, &b.bodies)
+        let (x, y) = (view(&a.bodies), view(&b.bodies));
+        a.events == b.events
+            && a.homes == b.homes
+            && x.len() == y.len()
+            && x.iter().zip(y).all(|(p, q)| {
+                if self.bug == PlantedBug::CutoffByIdsOnly {
+                    M::id(p) == M::id(q)
+                } else {
+                    M::same_bits(p, q)
+                }
+            })
     }
 
     fn same_pairs(&self, a: &[(u32, M::State)], b: &[(u32, M::State)]) -> bool {
@@ -897,7 +990,7 @@ impl<M: CellModel> World<M> {
     /// origin step: whether it is not empty).
     fn changed(&self, x: usize, u: Step) -> bool {
         let i = self.si(u);
-        let cur = &self.slots[i].states[x];
+        let cur = self.slots[i].state(x);
         if u == self.origin {
             return !cur.is_empty();
         }
@@ -906,7 +999,7 @@ impl<M: CellModel> World<M> {
             "ghost of step {u} evaluated without the state of step {}",
             u - 1
         );
-        !Self::same_states(&self.slots[i - 1].states[x], cur)
+        !Self::same_states(self.slots[i - 1].state(x), cur)
     }
 
     /// (Re)sends the ghost of own cell `x` at step `t` to every world owning a neighbour.
@@ -923,12 +1016,12 @@ impl<M: CellModel> World<M> {
         let (send, follows) = if self.mode == RollbackMode::Conservative {
             (true, false)
         } else if !self.delta() {
-            (!self.slots[self.si(t)].states[x].is_empty(), false)
+            (!self.slots[self.si(t)].state(x).is_empty(), false)
         } else {
             let now = self.changed(x, t);
             (now || (t > self.origin && self.changed(x, t - 1)), now)
         };
-        let cur = &self.slots[self.si(t)].states[x];
+        let cur = self.slots[self.si(t)].state(x);
         let content: Option<Bodies<M::State>> =
             send.then(|| Arc::new(cur.iter().map(|b| (cell, b.clone())).collect()));
         for k in 0..self.targets[x].len() {
@@ -949,10 +1042,9 @@ impl<M: CellModel> World<M> {
         let content: Vec<(u32, M::State)> = self.slots[i].outs[x]
             .as_ref()
             .map(|o| {
-                o.bodies
-                    .iter()
+                o.pairs()
                     .filter(|(d, _)| part.owner(*d) == w)
-                    .cloned()
+                    .map(|(d, b)| (d, b.clone()))
                     .collect()
             })
             .unwrap_or_default();
@@ -965,7 +1057,7 @@ impl<M: CellModel> World<M> {
     /// Rebuilds the state of own cell `d` at `t ≥ base + 1` from the outputs at `t − 1` of the
     /// own cells around it and the migrations into it. Returns the previous state if it
     /// changed.
-    fn rebuild_state(&mut self, d: u32, t: Step) -> Option<Vec<M::State>> {
+    fn rebuild_state(&mut self, d: u32, t: Step) -> Option<Shared<M::State>> {
         let grid = &*self.grid;
         let part = &*self.part;
         let prev = &self.slots[(t - 1 - self.base) as usize];
@@ -975,7 +1067,7 @@ impl<M: CellModel> World<M> {
             let ni = grid.index(n) as u32;
             if part.owner(ni) == self.id {
                 if let Some(o) = &prev.outs[part.local(ni) as usize] {
-                    v.extend(o.landing_in(d).iter().map(|p| p.1.clone()));
+                    v.extend(o.landing_in(d).iter().cloned());
                 }
             }
         }
@@ -996,10 +1088,10 @@ impl<M: CellModel> World<M> {
         v.sort_by_key(|b| M::id(b));
         let ld = part.local(d) as usize;
         let i = (t - self.base) as usize;
-        if Self::same_states(&v, &self.slots[i].states[ld]) {
+        if Self::same_states(&v, self.slots[i].state(ld)) {
             return None;
         }
-        Some(std::mem::replace(&mut self.slots[i].states[ld], v))
+        Some(std::mem::replace(&mut self.slots[i].states[ld], share(v)))
     }
 
     /// The own cells around `cell` whose computation at `s` must be redone because the state
@@ -1024,7 +1116,7 @@ impl<M: CellModel> World<M> {
                 continue;
             }
             let x = self.part.local(ni) as usize;
-            let state = &slot.states[x];
+            let state = slot.state(x);
             let produced = slot.outs[x].as_ref().is_some_and(|o| !o.is_empty());
             let reads = if !filter || ni == cell {
                 !state.is_empty() || produced
@@ -1053,7 +1145,7 @@ impl<M: CellModel> World<M> {
     /// The state of own cell `d` at `t ≤ head` changed from `old`: re-send its ghost, and if
     /// step `t` was computed, dirty the cells reading it. Returns whether something became
     /// dirty.
-    fn on_state_change(&mut self, d: u32, t: Step, old: Vec<M::State>) -> bool {
+    fn on_state_change(&mut self, d: u32, t: Step, old: Shared<M::State>) -> bool {
         let x = self.part.local(d) as usize;
         self.ghost_due.insert((t, x));
         if self.delta() {
@@ -1067,7 +1159,7 @@ impl<M: CellModel> World<M> {
             return false;
         }
         let i = self.si(t);
-        let cells = self.cells_reading(d, t, &old, &self.slots[i].states[x]);
+        let cells = self.cells_reading(d, t, view(&old), self.slots[i].state(x));
         self.mark_dirty(t, cells)
     }
 
@@ -1286,7 +1378,7 @@ impl<M: CellModel> World<M> {
             .collect();
         if step <= self.head {
             for (x, st) in self.slots[i].states.iter().enumerate() {
-                if st.iter().any(|b| msg.removes.contains(&M::id(b))) {
+                if view(st).iter().any(|b| msg.removes.contains(&M::id(b))) {
                     cells.insert(self.cells[x]);
                 }
             }
@@ -1315,8 +1407,8 @@ impl<M: CellModel> World<M> {
         let mut changed_mig: BTreeSet<(usize, WorldId)> = BTreeSet::new();
         for x in cells {
             let x = x as usize;
-            let new = if self.slots[i].states[x].is_empty() {
-                Out::empty()
+            let new = if self.slots[i].state(x).is_empty() {
+                Out::empty(self.cells[x])
             } else {
                 self.counters.cells_recomputed += 1;
                 if let Some(r) = &mut self.record {
@@ -1324,7 +1416,9 @@ impl<M: CellModel> World<M> {
                 }
                 self.compute(x, s)
             };
-            let mut old = self.slots[i].outs[x].take().unwrap_or_else(Out::empty);
+            let mut old = self.slots[i].outs[x]
+                .take()
+                .unwrap_or_else(|| Out::empty(self.cells[x]));
             // The earlier computation of this cell-step is superseded (its result is kept
             // only if equal, and then it stands for the new computation).
             self.counters.cells_rolled_back += old.computed as u64;
@@ -1333,11 +1427,11 @@ impl<M: CellModel> World<M> {
                 self.slots[i].outs[x] = Some(old);
                 continue;
             }
-            for (d, _) in old.bodies.iter().chain(new.bodies.iter()) {
-                if self.is_own(*d) {
-                    changed_dst.insert(*d);
+            for (d, _) in old.pairs().chain(new.pairs()) {
+                if self.is_own(d) {
+                    changed_dst.insert(d);
                 } else {
-                    changed_mig.insert((x, self.part.owner(*d)));
+                    changed_mig.insert((x, self.part.owner(d)));
                 }
             }
             self.slots[i].outs[x] = Some(new);
@@ -1359,35 +1453,37 @@ impl<M: CellModel> World<M> {
         self.counters.steps_computed += 1;
         let i = self.si(h);
         let n = self.cells.len();
-        // The states at h + 1 are gathered by scattering the outputs (one pass over the
-        // bodies) rather than rebuilt cell by cell from 27 neighbours' outputs; the cells that
-        // also receive early migrations, or any cell when inputs apply at h + 1, take the
-        // general rule (`rebuild_state`). Either way a state is the id-sorted union (K1).
-        // Each is sized like the cell's state at h: bodies mostly stay in their cell.
-        let mut fresh: Vec<Vec<M::State>> = self.slots[i]
-            .states
-            .iter()
-            .map(|v| Vec::with_capacity(v.len()))
-            .collect();
-        let mut landed = vec![false; n];
+        // How many own cells' outputs land in each own cell (each output counted once).
+        let mut landings = vec![0u32; n];
         let mut migs: BTreeSet<(usize, WorldId)> = BTreeSet::new();
         for x in 0..n {
-            let o = if self.slots[i].states[x].is_empty() {
-                Out::empty()
+            let o = if self.slots[i].state(x).is_empty() {
+                Out::empty(self.cells[x])
             } else {
                 self.compute(x, h)
             };
-            for (d, b) in &o.bodies {
-                if self.is_own(*d) {
-                    let ld = self.part.local(*d) as usize;
-                    fresh[ld].push(b.clone());
-                    landed[ld] = true;
-                } else {
-                    migs.insert((x, self.part.owner(*d)));
+            if o.stays() {
+                landings[x] += o.bodies.is_some() as u32;
+            } else {
+                let mut last = None;
+                for &d in &o.homes {
+                    if last == Some(d) {
+                        continue;
+                    }
+                    last = Some(d);
+                    if self.is_own(d) {
+                        landings[self.part.local(d) as usize] += 1;
+                    } else {
+                        migs.insert((x, self.part.owner(d)));
+                    }
                 }
             }
             self.slots[i].outs[x] = Some(o);
         }
+        // The state at h + 1 of a cell whose own output alone lands in it is that output (one
+        // shared allocation, no copy). The other cells that something lands in, those that
+        // also receive early migrations, and every cell when inputs apply at h + 1, take the
+        // general rule (`rebuild_state`). Either way a state is the id-sorted union (K1).
         let part = &*self.part;
         let id = self.id;
         let next = &self.slots[i + 1];
@@ -1405,19 +1501,23 @@ impl<M: CellModel> World<M> {
         // Inputs at h + 1 (rare) may remove ids from any cell: every cell takes the general
         // rule then.
         let inputs = !next.inputs.is_empty();
-        for (ld, mut v) in fresh.into_iter().enumerate() {
-            if !landed[ld] {
+        for (x, &k) in landings.iter().enumerate() {
+            if k == 0 {
                 continue;
             }
-            if inputs || general.contains(&self.cells[ld]) {
-                general.insert(self.cells[ld]);
+            let alone = k == 1
+                && self.slots[i].outs[x]
+                    .as_ref()
+                    .is_some_and(|o| o.stays() && o.bodies.is_some());
+            if inputs || !alone || general.contains(&self.cells[x]) {
+                general.insert(self.cells[x]);
                 continue;
             }
-            if !v.is_sorted_by_key(|b| M::id(b)) {
-                v.sort_by_key(|b| M::id(b));
-            }
-            debug_assert!(self.slots[i + 1].states[ld].is_empty());
-            self.slots[i + 1].states[ld] = v;
+            debug_assert!(self.slots[i + 1].states[x].is_none());
+            let bodies = self.slots[i].outs[x]
+                .as_ref()
+                .and_then(|o| o.bodies.clone());
+            self.slots[i + 1].states[x] = bodies;
         }
         for d in general {
             self.rebuild_state(d, h + 1);
@@ -1529,7 +1629,7 @@ impl<M: CellModel> World<M> {
             return false;
         }
         let cell = self.cells[x];
-        let occupied = !self.slots[i].states[x].is_empty();
+        let occupied = !self.slots[i].state(x).is_empty();
         if occupied {
             let c = self.grid.coord(cell as usize);
             let ready = self
@@ -1543,7 +1643,7 @@ impl<M: CellModel> World<M> {
         let o = if occupied {
             self.compute(x, s)
         } else {
-            Out::empty()
+            Out::empty(cell)
         };
         self.ensure_slot(s + 1);
         self.slots[i].outs[x] = Some(o);
