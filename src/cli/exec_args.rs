@@ -140,7 +140,7 @@ pub struct ExecutorArgs {
     #[arg(long, value_enum, value_name = "on|off")]
     pub balance_backoff: Option<SwitchArg>,
     /// Load level thresholds as fractions of the mean load, `UNDER,HIGH,OVER`
-    /// [default: 0.8,1.2,1.5]: below UNDER a world is underloaded, above HIGH highly loaded,
+    /// [default: 0.8,1.05,1.5]: below UNDER a world is underloaded, above HIGH highly loaded,
     /// above OVER overloaded.
     #[arg(long, value_name = "U,H,O")]
     pub balance_thresholds: Option<String>,

@@ -306,6 +306,8 @@ pub struct BalanceConfig {
     /// loaded neighbour on its own initiative).
     pub overloaded: f64,
     /// Weight of the newest measurement in the exponential smoothing of loads, in (0, 1].
+    /// Smoothing spans rounds that move no cell: after a round that moved cells, the next
+    /// round takes its measurement of the new map as it is (SPEC.md §K13).
     pub smoothing: f64,
     /// Rounds during which a cell that moved cannot move again (hysteresis).
     pub cooldown: u64,
@@ -332,7 +334,7 @@ impl Default for BalanceConfig {
             period: 20,
             backoff: true,
             underloaded: 0.8,
-            high: 1.2,
+            high: 1.05,
             overloaded: 1.5,
             smoothing: 0.5,
             cooldown: 2,

@@ -217,7 +217,13 @@ impl Balancer {
                 moved += 1;
             }
         }
-        self.smoothed = Some(est);
+        // Smoothing averages measurements of one owner map. After cells moved, the next
+        // measurement (of the new map) replaces the estimate instead of being averaged with
+        // this round's projection: the projection cannot foresee loads that grow unevenly
+        // (a pile landing in one territory while empty worlds' bookkeeping stays flat), and
+        // halving every correction left the busiest world ~10 % above its share (README.md,
+        // Load balancing). Moved cells still cool down, so this does not make them bounce.
+        self.smoothed = (moved == 0).then_some(est);
         self.history.push(RoundRecord {
             step,
             imbalance: imbalance(&loads),
@@ -303,6 +309,33 @@ mod tests {
         let p2 = b.round(&g, &p1, &[0.0, 4.0], &[0.0; 2], &bodies, 10);
         let moved_back = p2.is_some_and(|p2| p2.owner(3) == 0 || p2.owner(2) == 0);
         assert!(!moved_back, "a cell bounced back during its cooldown");
+    }
+
+    #[test]
+    fn after_cells_moved_the_next_round_takes_its_measurement_unsmoothed() {
+        let (g, p, bodies) = row();
+        let config = BalanceConfig {
+            smoothing: 0.5,
+            cooldown: 0,
+            ..BalanceConfig::on()
+        };
+        let mut b = Balancer::new(&config, g.cell_count());
+        let p1 = b
+            .round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 10)
+            .expect("cells move");
+        // The move projects [2, 2]; the new map measures [3.2, 0.8]. Averaged with the
+        // projection that would be [2.6, 1.4], merely high (above 1.05 × 2); taken as
+        // measured, world 0 is overloaded (above 1.5 × 2).
+        b.round(&g, &p1, &[3.2, 0.8], &[0.0; 2], &bodies, 20);
+        assert_eq!(b.history()[1].levels[0], LoadLevel::Overloaded);
+        // Without a move in between, measurements are smoothed as before: [2, 2] (nothing
+        // moves) then [3.2, 0.8] average to [2.6, 1.4].
+        let mut b = Balancer::new(&config, g.cell_count());
+        assert!(b
+            .round(&g, &p, &[2.0, 2.0], &[0.0; 2], &bodies, 10)
+            .is_none());
+        b.round(&g, &p, &[3.2, 0.8], &[0.0; 2], &bodies, 20);
+        assert_eq!(b.history()[1].levels[0], LoadLevel::High, "2.6 against 2");
     }
 
     #[test]
