@@ -3,11 +3,14 @@
 //! 200) with `BAL_WORLDS` worlds (default 8) on `BAL_THREADS` threads (default 2), `cell`
 //! mode, window 16, blocks partition. Runs off and on alternately `BAL_REPEATS` times
 //! (default 3), with the threaded laggard lead `BAL_LEAD` (default 0), thresholds
-//! `BAL_THRESHOLDS=U,H,O` (default 0.8,1.2,1.5), backoff `BAL_BACKOFF=on|off` (default on)
+//! `BAL_THRESHOLDS=U,H,O` (default 0.8,1.05,1.5), backoff `BAL_BACKOFF=on|off` (default on)
 //! and ghost policy `BAL_GHOSTS`
 //! (delta or full, default delta), and prints each run's wall time, the medians and their ratio, the run-wide
 //! imbalance (max/mean busy seconds per world) and the balancing counters; every run's
-//! committed hashes must be identical.
+//! committed hashes must be identical. Each run also shows the CPU other processes took
+//! meanwhile (`other cores`, from `/proc`), and the medians are repeated over the pairs where
+//! it stayed below 0.1 core: a neighbour on one of two cores slows the balanced run, which
+//! needs both, and not the unbalanced one, which is effectively serial.
 //!
 //! The timed "on" runs use the default backoff (SPEC.md §K13: idle rounds thin out).
 //! Imbalance over time: one more run of each with a balancing round every `BAL_PERIOD`
@@ -95,12 +98,21 @@ fn main() {
         "skewed, {objects} cubes, {steps} steps, {worlds} worlds on {threads} threads, \
          balancing period {period}"
     );
-    println!("run  balance  wall s  imbalance  rounds  cells moved  famines  busy s  hash");
+    println!(
+        "run  balance  wall s  imbalance  rounds  cells moved  famines  busy s  idle s  gvt s  \
+         other cores  hash"
+    );
     let mut hash = None;
     let mut walls = [Vec::new(), Vec::new()];
+    // Per pair, whether other processes left the machine to this bench (see `OtherCpu`).
+    let mut quiet_pairs = Vec::new();
     for r in 0..repeats {
+        let mut quiet = true;
         for (k, balance) in [BalanceConfig::default(), on.clone()].iter().enumerate() {
+            let other = OtherCpu::start();
             let rep = run(balance);
+            let other_cores = other.cores();
+            quiet &= other_cores.is_some_and(|c| c < QUIET_CORES);
             let last = rep.frames.last().map(|f| f.hash).unwrap_or(0);
             assert_eq!(
                 *hash.get_or_insert(last),
@@ -109,7 +121,8 @@ fn main() {
             );
             let b = &rep.counters.balance;
             println!(
-                "{r:>3}  {:>7}  {:>6.3}  {:>9.3}  {:>6}  {:>11}  {:>7}  {:>6.2}  {last:016x}",
+                "{r:>3}  {:>7}  {:>6.3}  {:>9.3}  {:>6}  {:>11}  {:>7}  {:>6.2}  {:>6.2}  {:>5.2}  \
+                 {:>11}  {last:016x}",
                 if balance.enabled { "on" } else { "off" },
                 rep.wall_seconds,
                 b.imbalance,
@@ -117,9 +130,13 @@ fn main() {
                 b.cells_moved,
                 b.famines,
                 rep.times.busy_seconds,
+                rep.times.idle_seconds,
+                rep.times.gvt_seconds,
+                other_cores.map_or("?".to_string(), |c| format!("{c:.2}")),
             );
             walls[k].push(rep.wall_seconds);
         }
+        quiet_pairs.push(quiet);
     }
     let off_m = median(&walls[0]);
     let on_m = median(&walls[1]);
@@ -127,6 +144,26 @@ fn main() {
         "median wall: off {off_m:.3} s, on {on_m:.3} s, speed-up with balancing {:.2}x",
         off_m / on_m
     );
+    let quiet_walls = |k: usize| -> Vec<f64> {
+        walls[k]
+            .iter()
+            .zip(&quiet_pairs)
+            .filter(|(_, &q)| q)
+            .map(|(&w, _)| w)
+            .collect()
+    };
+    let (quiet_off, quiet_on) = (quiet_walls(0), quiet_walls(1));
+    if quiet_off.is_empty() {
+        println!("no pair ran with other processes below {QUIET_CORES} cores");
+    } else {
+        let (q_off, q_on) = (median(&quiet_off), median(&quiet_on));
+        println!(
+            "median wall of the {} of {repeats} pairs with other processes below {QUIET_CORES} \
+             cores: off {q_off:.3} s, on {q_on:.3} s, {:.2}x",
+            quiet_off.len(),
+            q_off / q_on
+        );
+    }
     let watched = run(&monitor);
     let balanced = run(&every_period);
     let dir = std::path::Path::new("target/balance");
@@ -190,4 +227,53 @@ fn main() {
         );
     }
     println!("wrote {}", path.display());
+}
+
+/// Other processes' CPU below which a pair of runs counts as quiet, in cores.
+const QUIET_CORES: f64 = 0.1;
+
+/// CPU time other processes took while a run ran, from `/proc` (Linux; `None` elsewhere):
+/// the machine's busy ticks minus this process's, over the elapsed ticks of all cores. On a
+/// 2-core machine a single-threaded neighbour (a compiler, a profiler) takes the core the
+/// balanced run needs and none that the unbalanced, effectively serial run needs, so its
+/// wall-time ratio is only meaningful beside this.
+struct OtherCpu {
+    start: Option<(u64, u64, u64)>,
+}
+
+impl OtherCpu {
+    fn start() -> Self {
+        OtherCpu {
+            start: Self::ticks(),
+        }
+    }
+
+    /// Cores' worth of CPU other processes used since `start`.
+    fn cores(&self) -> Option<f64> {
+        let (busy0, all0, own0) = self.start?;
+        let (busy1, all1, own1) = Self::ticks()?;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get()) as f64;
+        let other = (busy1 - busy0).saturating_sub(own1 - own0) as f64;
+        Some(other / (all1 - all0).max(1) as f64 * cores)
+    }
+
+    /// (busy ticks of all cores, all ticks of all cores, this process's user + system ticks).
+    fn ticks() -> Option<(u64, u64, u64)> {
+        let stat = std::fs::read_to_string("/proc/stat").ok()?;
+        let cpu: Vec<u64> = stat
+            .lines()
+            .next()?
+            .split_whitespace()
+            .skip(1)
+            .filter_map(|x| x.parse().ok())
+            .collect();
+        // user nice system idle iowait irq softirq steal (guest time is inside user).
+        let all: u64 = cpu.iter().take(8).sum();
+        let busy = all - cpu.get(3)? - cpu.get(4)?;
+        let me = std::fs::read_to_string("/proc/self/stat").ok()?;
+        // Fields after the parenthesised name: utime and stime are the 12th and 13th.
+        let rest: Vec<&str> = me.rsplit_once(')')?.1.split_whitespace().collect();
+        let own = rest.get(11)?.parse::<u64>().ok()? + rest.get(12)?.parse::<u64>().ok()?;
+        Some((busy, all, own))
+    }
 }
