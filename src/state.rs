@@ -92,14 +92,55 @@ impl<S: Clone> CellStates<S> {
 
     /// All entities, sorted by id.
     pub fn sorted<M: CellModel<State = S>>(&self) -> Vec<&S> {
-        let mut all: Vec<&S> = self.cells.iter().flatten().collect();
-        all.sort_by_key(|s| M::id(s));
-        all
+        let mut keyed: Vec<(u64, &S)> =
+            self.cells.iter().flatten().map(|s| (M::id(s), s)).collect();
+        sort_by_id(&mut keyed);
+        keyed.into_iter().map(|k| k.1).collect()
     }
 
     /// The canonical state hash (SPEC.md §Hash).
     pub fn hash<M: CellModel<State = S>>(&self) -> u64 {
         canonical_hash::<M>(self.sorted::<M>())
+    }
+}
+
+/// Sorts `(id, item)` pairs by id (ids unique, so the order is the one id order): a stable
+/// least-significant-digit radix sort over the id bytes that differ between the items.
+/// Every committed frame sorts all its entities by id; on thousands of ids this is several
+/// times cheaper than a comparison sort (few passes, no data-dependent branches).
+pub fn sort_by_id<T: Copy>(items: &mut Vec<(u64, T)>) {
+    if items.len() < 64 {
+        items.sort_unstable_by_key(|p| p.0);
+        return;
+    }
+    let (mut any, mut all) = (0u64, u64::MAX);
+    for p in items.iter() {
+        any |= p.0;
+        all &= p.0;
+    }
+    let varying = any ^ all;
+    let mut buffer: Vec<(u64, T)> = Vec::with_capacity(items.len());
+    for shift in (0..64).step_by(8) {
+        if (varying >> shift) & 0xff == 0 {
+            continue;
+        }
+        let digit = |id: u64| ((id >> shift) & 0xff) as usize;
+        let mut start = [0usize; 256];
+        for p in items.iter() {
+            start[digit(p.0)] += 1;
+        }
+        let mut sum = 0;
+        for c in start.iter_mut() {
+            (*c, sum) = (sum, sum + *c);
+        }
+        buffer.clear();
+        buffer.resize(items.len(), items[0]);
+        for p in items.iter() {
+            let d = digit(p.0);
+            buffer[start[d]] = *p;
+            start[d] += 1;
+        }
+        std::mem::swap(items, &mut buffer);
     }
 }
 
@@ -111,4 +152,39 @@ pub fn canonical_hash<'a, M: CellModel>(sorted: impl IntoIterator<Item = &'a M::
         M::hash_state(s, &mut h);
     }
     h.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sort_by_id;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn radix_sort_by_id_gives_the_comparison_sort_order_for_any_ids() {
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        for (n, bits) in [
+            (0, 8),
+            (5, 8),
+            (63, 16),
+            (64, 16),
+            (1000, 13),
+            (5000, 64),
+            (3000, 40),
+        ] {
+            let mut ids: Vec<u64> = Vec::new();
+            while ids.len() < n {
+                let id = rng.random::<u64>() >> (64 - bits);
+                if !ids.contains(&id) {
+                    ids.push(id);
+                }
+            }
+            let mut items: Vec<(u64, usize)> =
+                ids.iter().enumerate().map(|(k, &id)| (id, k)).collect();
+            let mut expected = items.clone();
+            expected.sort_unstable_by_key(|p| p.0);
+            sort_by_id(&mut items);
+            assert_eq!(items, expected, "{n} ids of {bits} bits");
+        }
+    }
 }
