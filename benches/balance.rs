@@ -22,6 +22,10 @@
 //! medians. Run: `cargo bench --bench balance`; `cargo bench --bench balance -- --test` (or
 //! `cargo test --benches`) runs a tiny version.
 
+/// The `soda` binary's allocator (src/main.rs), so the bench measures what the CLI runs.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 #[path = "common/knobs.rs"]
 mod knobs;
 
