@@ -21,6 +21,7 @@
 //!
 //! This is the only module that starts threads, and it does so through [`Facade`].
 
+use super::clock::thread_cpu_seconds;
 use super::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex, StdFacade};
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
@@ -167,24 +168,6 @@ struct Slot<M: CellModel> {
     busy: f64,
     /// The summed LVT − GVT after its actions since the last round, and their number.
     lead: (f64, u64),
-}
-
-/// CPU seconds the calling thread has run (not counting time other processes took the
-/// core), for load measurements that hold on a shared machine; wall-clock time where the
-/// thread clock is unavailable.
-fn thread_cpu_seconds() -> f64 {
-    let mut t = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `t` is a valid, writable timespec and the clock id is a constant.
-    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) } == 0;
-    if ok {
-        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
-    } else {
-        thread_local!(static START: Instant = Instant::now());
-        START.with(|s| s.elapsed().as_secs_f64())
-    }
 }
 
 /// Committed steps being assembled from the worlds' contributions.
