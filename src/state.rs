@@ -92,10 +92,7 @@ impl<S: Clone> CellStates<S> {
 
     /// All entities, sorted by id.
     pub fn sorted<M: CellModel<State = S>>(&self) -> Vec<&S> {
-        let mut keyed: Vec<(u64, &S)> =
-            self.cells.iter().flatten().map(|s| (M::id(s), s)).collect();
-        sort_by_id(&mut keyed);
-        keyed.into_iter().map(|k| k.1).collect()
+        sorted_by_id::<M>(self.cells.iter().flatten())
     }
 
     /// The canonical state hash (SPEC.md §Hash).
@@ -142,6 +139,16 @@ pub fn sort_by_id<T: Copy>(items: &mut Vec<(u64, T)>) {
         }
         std::mem::swap(items, &mut buffer);
     }
+}
+
+/// `states` (any order) sorted by id, through (id, state) keys without moving the states
+/// ([`sort_by_id`]): the order every frame is hashed in.
+pub fn sorted_by_id<'a, M: CellModel>(
+    states: impl IntoIterator<Item = &'a M::State>,
+) -> Vec<&'a M::State> {
+    let mut keyed: Vec<(u64, &M::State)> = states.into_iter().map(|s| (M::id(s), s)).collect();
+    sort_by_id(&mut keyed);
+    keyed.into_iter().map(|k| k.1).collect()
 }
 
 /// The canonical hash of a set of entity states given in ascending id order.

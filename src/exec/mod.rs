@@ -12,21 +12,18 @@ use crate::grid::Grid;
 use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::{Balancer, KernelConfig, Partition, World, WorldId};
 use crate::model::{CellModel, Step};
-use crate::state::{canonical_hash, sort_by_id, CellStates};
+use crate::state::{canonical_hash, sorted_by_id, CellStates};
 use std::sync::Arc;
 
 /// The committed frame of step `t` from every world's states (any order) and events: the
 /// states sorted by id and hashed as the reference hashes them, the events sorted. Returns
-/// the sorted states too. Sorted through (id, state) keys, without moving the states
-/// ([`sort_by_id`]).
+/// the sorted states too ([`sorted_by_id`]).
 pub(crate) fn whole_frame<'a, M: CellModel>(
     t: Step,
     states: impl IntoIterator<Item = &'a M::State>,
     mut events: Vec<Event>,
 ) -> (Frame, Vec<&'a M::State>) {
-    let mut keyed: Vec<(u64, &M::State)> = states.into_iter().map(|s| (M::id(s), s)).collect();
-    sort_by_id(&mut keyed);
-    let sorted: Vec<&M::State> = keyed.into_iter().map(|k| k.1).collect();
+    let sorted = sorted_by_id::<M>(states);
     events.sort();
     let frame = Frame {
         step: t,

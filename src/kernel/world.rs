@@ -884,30 +884,31 @@ impl<M: CellModel> World<M> {
         }
     }
 
+    /// Whether two outputs are the same (early cut-off and lazy cancellation compare
+    /// entities with [`World::same_entity`]).
     fn same_out(&self, a: &Out<M::State>, b: &Out<M::State>) -> bool {
         let (x, y) = (view(&a.bodies), view(&b.bodies));
         a.events == b.events
             && a.homes == b.homes
             && x.len() == y.len()
-            && x.iter().zip(y).all(|(p, q)| {
-                if self.bug == PlantedBug::CutoffByIdsOnly {
-                    M::id(p) == M::id(q)
-                } else {
-                    M::same_bits(p, q)
-                }
-            })
+            && x.iter().zip(y).all(|(p, q)| self.same_entity(p, q))
     }
 
     fn same_pairs(&self, a: &[(u32, M::State)], b: &[(u32, M::State)]) -> bool {
         a.len() == b.len()
-            && a.iter().zip(b).all(|(x, y)| {
-                x.0 == y.0
-                    && if self.bug == PlantedBug::CutoffByIdsOnly {
-                        M::id(&x.1) == M::id(&y.1)
-                    } else {
-                        M::same_bits(&x.1, &y.1)
-                    }
-            })
+            && a.iter()
+                .zip(b)
+                .all(|(x, y)| x.0 == y.0 && self.same_entity(&x.1, &y.1))
+    }
+
+    /// Bit equality of two entity states — or, under the planted bug
+    /// [`PlantedBug::CutoffByIdsOnly`], equality of their ids only.
+    fn same_entity(&self, a: &M::State, b: &M::State) -> bool {
+        if self.bug == PlantedBug::CutoffByIdsOnly {
+            M::id(a) == M::id(b)
+        } else {
+            M::same_bits(a, b)
+        }
     }
 
     fn same_states(a: &[M::State], b: &[M::State]) -> bool {
