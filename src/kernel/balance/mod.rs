@@ -260,6 +260,17 @@ mod tests {
         (g, p, bodies)
     }
 
+    /// A balancer with `config` after one round at `step` in which world 0 measured all the
+    /// load on `row()` and gave cells away; returns it with the new partition.
+    fn after_first_move(config: &BalanceConfig, step: Step) -> (Balancer, Partition) {
+        let (g, p, bodies) = row();
+        let mut b = Balancer::new(config, g.cell_count());
+        let p1 = b
+            .round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, step)
+            .expect("cells move");
+        (b, p1)
+    }
+
     #[test]
     fn levels_follow_the_thresholds_against_the_mean() {
         let b = Balancer::new(&BalanceConfig::on(), 1);
@@ -301,10 +312,7 @@ mod tests {
             smoothing: 1.0,
             ..BalanceConfig::on()
         };
-        let mut b = Balancer::new(&config, g.cell_count());
-        let p1 = b
-            .round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 5)
-            .expect("cells move");
+        let (mut b, p1) = after_first_move(&config, 5);
         // World 1 now measures all the load, but the moved cells are cooling down.
         let p2 = b.round(&g, &p1, &[0.0, 4.0], &[0.0; 2], &bodies, 10);
         let moved_back = p2.is_some_and(|p2| p2.owner(3) == 0 || p2.owner(2) == 0);
@@ -319,10 +327,7 @@ mod tests {
             cooldown: 0,
             ..BalanceConfig::on()
         };
-        let mut b = Balancer::new(&config, g.cell_count());
-        let p1 = b
-            .round(&g, &p, &[4.0, 0.0], &[0.0; 2], &bodies, 10)
-            .expect("cells move");
+        let (mut b, p1) = after_first_move(&config, 10);
         // The move projects [2, 2]; the new map measures [3.2, 0.8]. Averaged with the
         // projection that would be [2.6, 1.4], merely high (above 1.05 × 2); taken as
         // measured, world 0 is overloaded (above 1.5 × 2).
