@@ -5,7 +5,8 @@
 //! (default 3), with the threaded laggard lead `BAL_LEAD` (default 0), thresholds
 //! `BAL_THRESHOLDS=U,H,O` (default 0.8,1.05,1.5), backoff `BAL_BACKOFF=on|off` (default on)
 //! and ghost policy `BAL_GHOSTS`
-//! (delta or full, default delta), and prints each run's wall time, the medians and their ratio, the run-wide
+//! (delta or full, default delta), and prints each run's wall time, the medians and their ratio (and the
+//! median of the pair speed-ups), the run-wide
 //! imbalance (max/mean busy seconds per world) and the balancing counters; every run's
 //! committed hashes must be identical. Each run also shows the CPU other processes took
 //! meanwhile (`other cores`, from `/proc`), and the medians are repeated over the pairs where
@@ -29,7 +30,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 #[path = "common/knobs.rs"]
 mod knobs;
 
-use knobs::{env, median};
+use knobs::{env, median, median_ratio};
 use soda::exec::threaded::{run_threaded, ThreadedReport};
 use soda::kernel::{BalanceConfig, GhostPolicy, KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
@@ -145,8 +146,10 @@ fn main() {
     let off_m = median(&walls[0]);
     let on_m = median(&walls[1]);
     println!(
-        "median wall: off {off_m:.3} s, on {on_m:.3} s, speed-up with balancing {:.2}x",
-        off_m / on_m
+        "median wall: off {off_m:.3} s, on {on_m:.3} s, speed-up with balancing {:.2}x \
+         (median of the {repeats} pair speed-ups {:.2}x)",
+        off_m / on_m,
+        median_ratio(&walls[0], &walls[1])
     );
     let quiet_walls = |k: usize| -> Vec<f64> {
         walls[k]

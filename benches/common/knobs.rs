@@ -1,5 +1,6 @@
 //! Shared by the benches that take their sizes from the environment: whether the run is the
-//! tiny `--test` version, numeric knobs, and medians of repeated wall times.
+//! tiny `--test` version, numeric knobs, and medians of repeated wall times and of their
+//! pairwise ratios.
 
 /// Whether this is the tiny version (`cargo test --benches`, or `-- --test`).
 pub fn quick() -> bool {
@@ -29,4 +30,10 @@ pub fn median(v: &[f64]) -> f64 {
     } else {
         (s[m - 1] + s[m]) / 2.0
     }
+}
+
+/// The median of `a[k] / b[k]` over pairs of runs taken back to back: robust when the
+/// machine's speed drifts between pairs, as the ratio of the medians is not.
+pub fn median_ratio(a: &[f64], b: &[f64]) -> f64 {
+    median(&a.iter().zip(b).map(|(x, y)| x / y).collect::<Vec<f64>>())
 }
