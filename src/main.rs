@@ -5,7 +5,7 @@ mod cli;
 
 /// mimalloc instead of the system allocator: worlds on several threads allocate message
 /// bodies and states that other threads free, which glibc's per-thread arenas pay for
-/// (README.md, load balancing: the balanced run's CPU fell by 5-19 %).
+/// (README.md, load balancing: the balanced run's action CPU fell by 4-19 % in two measurements).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
