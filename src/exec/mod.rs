@@ -3,6 +3,7 @@
 
 pub mod clock;
 pub mod reference;
+mod schedule;
 pub mod sync;
 pub mod threaded;
 pub mod virtual_exec;

@@ -2,7 +2,8 @@
 //! in one shared set ordered critical path first (the laggard first; among worlds at the
 //! same step, the one whose last computation took longest); worlds that had to wait
 //! (postponed behind a laggard, or running elsewhere) go to a crossbeam-deque [`Injector`]
-//! that threads take from when nothing is ready. A world runs on at most one thread at a
+//! that threads take from when nothing is ready, until a message or a GVT advance moves
+//! them back into the ready set. A world runs on at most one thread at a
 //! time (its lock); a world that cannot act (window full, conservative dependency) simply is
 //! not rescheduled until a message or a GVT advance gives it something to do, so its thread
 //! serves other worlds.
@@ -22,6 +23,7 @@
 //! This is the only module that starts threads, and it does so through [`Facade`].
 
 use super::clock::thread_cpu_seconds;
+use super::schedule::Schedule;
 use super::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex, StdFacade};
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
@@ -36,7 +38,7 @@ use crate::kernel::KernelConfig;
 use crate::model::{CellModel, Step};
 use crossbeam_deque::{Injector, Steal};
 use std::cmp::Reverse;
-use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::collections::{BTreeMap, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 use std::time::Instant;
@@ -116,9 +118,6 @@ const FAILED: u64 = 2;
 /// The `spins` the output stage passes to [`Facade::pause`]: it polls at a slow pace.
 const OUTPUT_PAUSE: u32 = u32::MAX;
 
-/// The order of ready worlds: (published bound, longest last computation first, world).
-type ReadyKey = (Step, Reverse<u64>, usize);
-
 struct Shared<M: CellModel + 'static, F: Facade> {
     worlds: Vec<F::Mutex<Slot<M>>>,
     inboxes: Vec<F::Mutex<Vec<Message<M::State>>>>,
@@ -129,18 +128,16 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     /// Bumped before every write that can raise a `published` or `inbox_min` value, so a
     /// GVT reader can tell whether its snapshot is consistent (SPEC.md §K7).
     version: F::Atomic,
-    scheduled: Vec<F::Atomic>,
-    /// The worlds ready to act, best first ([`ReadyKey`]): the laggard (lowest published
-    /// bound) first and, among worlds at the same step, the one whose last computation took
-    /// longest — the critical path of a near-lockstep run — then by id.
-    ready: F::Mutex<BTreeSet<ReadyKey>>,
-    /// Per world, nanoseconds of its last forward computation (for [`ReadyKey`] only).
+    /// The ready set and where every world's task is.
+    sched: F::Mutex<Schedule>,
+    /// Per world, nanoseconds of its last forward computation (for the ready set's order only).
     cost: Vec<F::Atomic>,
     /// Per world, the thread that last ran an action of it (to count migrations).
     home: Vec<F::Atomic>,
-    /// Worlds that had to wait (postponed behind a laggard, or running elsewhere): any
-    /// thread takes them, so a waiting world never sits behind a busy thread's work.
-    waiting: Injector<usize>,
+    /// Tokens of worlds that had to wait (postponed behind a laggard, or running elsewhere):
+    /// any thread takes them when nothing is ready, so a waiting world never sits behind a
+    /// busy thread's work. A token is live only while the schedule still holds it.
+    waiting: Injector<(usize, u64)>,
     gvt: F::Atomic,
     committed: F::Atomic,
     gvt_round: F::Atomic,
@@ -209,16 +206,22 @@ impl<S> Default for Output<S> {
 const STALL_CHECK_SPINS: u32 = 20_000;
 
 impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
+    /// Queues world `w` in the ready set unless it is already queued or taken. A waiting
+    /// world moves to the ready set (its token goes stale): what woke it (a message, a GVT
+    /// advance) may let it act, and it must not wait behind worlds that are still blocked.
     fn schedule(&self, w: usize) {
-        if self.scheduled[w].swap(1) == 0 {
-            self.requeue(w);
-        }
+        let key = (self.published[w].load(), Reverse(self.cost[w].load()), w);
+        self.sched.lock().wake(key);
     }
 
-    /// Queues world `w` in the ready set (its flag already set).
-    fn requeue(&self, w: usize) {
-        let key = (self.published[w].load(), Reverse(self.cost[w].load()), w);
-        self.ready.lock().insert(key);
+    /// Sends world `w`'s task to the waiting queue: taken by a thread that found it running
+    /// elsewhere, or postponed by its own turn (then its task is idle, unless a message
+    /// queued it meanwhile: a ready task stays ready).
+    fn wait(&self, w: usize) {
+        let token = self.sched.lock().wait(w);
+        if let Some(token) = token {
+            self.waiting.push((w, token));
+        }
     }
 
     fn fail(&self, e: ExecError) {
@@ -252,14 +255,14 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// Returns whether it acted.
     fn run_world(&self, w: usize, me: usize, times: &mut ThreadTimes) -> bool {
         // A world another thread is running is not waited for: its task goes to the
-        // waiting queue with its flag still set (so the running thread does not queue a
+        // waiting queue (still counted as queued, so the running thread does not queue a
         // second copy), and this thread serves another world — e.g. its own, which may
         // speculate ahead (`lead`) instead of blocking until the neighbour's step is done.
         let Some(mut slot) = self.worlds[w].try_lock() else {
-            self.waiting.push(w);
+            self.wait(w);
             return false;
         };
-        self.scheduled[w].store(0);
+        self.sched.lock().locked(w);
         {
             let mut inbox = self.inboxes[w].lock();
             if !inbox.is_empty() {
@@ -285,10 +288,11 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         let Slot {
             world, busy, lead, ..
         } = &mut *slot;
-        if self.postpone(w, world) {
+        if self.postpone(world) {
             self.published[w].store(world.bound());
-            drop(slot);
-            self.waiting.push(w);
+            // Still under the world's lock: a message that arrives after this is seen
+            // waiting and wakes the world into the ready set.
+            self.wait(w);
             return false;
         }
         let acted = if world.wants_to_act(gvt) {
@@ -351,8 +355,8 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     /// slowest of its neighbour worlds (those it exchanges ghosts with) would compute with
     /// borders that are probably still to change. Worlds that are not neighbours do not hold
     /// it back. The slowest world of the run is never postponed, so the run always
-    /// progresses. Its flag stays set: the task goes to the waiting queue.
-    fn postpone(&self, w: usize, world: &World<M>) -> bool {
+    /// progresses. The caller sends the task to the waiting queue.
+    fn postpone(&self, world: &World<M>) -> bool {
         if !self.optimistic || !world.only_advances() {
             return false;
         }
@@ -362,11 +366,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             .map(|&v| self.published[v as usize].load())
             .min()
             .unwrap_or(Step::MAX);
-        let postpone = world.lvt() + 1 > slowest.saturating_add(self.lead);
-        if postpone {
-            self.scheduled[w].store(1);
-        }
-        postpone
+        world.lvt() + 1 > slowest.saturating_add(self.lead)
     }
 
     /// Hands the world's states of the steps below `gvt` not yet handed over to the frame
@@ -507,11 +507,16 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
 
     /// The next world task for thread `me`: the best ready world, else a waiting one.
     /// Counts in `steals` the tasks of worlds another thread ran last.
+    /// Stale waiting tokens (of worlds woken since) are dropped on the way.
     fn find_task(&self, me: usize, steals: &mut u64) -> Option<usize> {
-        let first = self.ready.lock().pop_first().map(|k| k.2);
+        let first = self.sched.lock().take_ready();
         let task = first.or_else(|| loop {
             match self.waiting.steal() {
-                Steal::Success(t) => break Some(t),
+                Steal::Success((w, token)) => {
+                    if self.sched.lock().take_waiting(w, token) {
+                        break Some(w);
+                    }
+                }
                 Steal::Retry => {}
                 Steal::Empty => break None,
             }
@@ -536,10 +541,13 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
                         times.busy_seconds += t0.elapsed().as_secs_f64();
                     } else {
                         // A turn that did nothing (the world was postponed, running
-                        // elsewhere, or had nothing to do): back off like an idle thread, so
-                        // a thread waiting for a laggard does not spin at full speed.
-                        F::pause(spins);
-                        spins = spins.saturating_add(1);
+                        // elsewhere, or had nothing to do): unless a world is ready, back
+                        // off like an idle thread, so a thread waiting for a laggard does
+                        // not spin at full speed.
+                        if !self.sched.lock().any_ready() {
+                            F::pause(spins);
+                            spins = spins.saturating_add(1);
+                        }
                         times.idle_seconds += t0.elapsed().as_secs_f64();
                     }
                     let g0 = Instant::now();
@@ -672,8 +680,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         published,
         inbox_min,
         version: F::Atomic::new(0),
-        scheduled: (0..n).map(|_| F::Atomic::new(1)).collect(),
-        ready: F::Mutex::new(BTreeSet::new()),
+        sched: F::Mutex::new(Schedule::new(n)),
         cost: (0..n).map(|_| F::Atomic::new(0)).collect(),
         home: (0..n)
             .map(|w| F::Atomic::new((w % threads) as u64))
@@ -770,7 +777,6 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         for (w, s) in locked.iter_mut().enumerate() {
             s.world.set_end(epoch_end);
             shared.published[w].store(s.world.bound());
-            shared.scheduled[w].store(1);
         }
         drop(locked);
         shared.target.store(epoch_end);
@@ -810,11 +816,10 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
     deliver: &mut impl FnMut(VecDeque<(Step, Partial<M::State>)>),
 ) -> Result<(), ExecError> {
     // Tasks left from an earlier epoch are stale: every world is queued once again.
-    shared.ready.lock().clear();
+    shared.sched.lock().reset();
     while !shared.waiting.steal().is_empty() {}
     for w in 0..shared.worlds.len() {
-        shared.scheduled[w].store(1);
-        shared.requeue(w);
+        shared.schedule(w);
     }
     let handles: Vec<F::Handle> = (0..threads)
         .map(|me| {
