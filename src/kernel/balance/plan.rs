@@ -11,6 +11,7 @@ use crate::grid::Grid;
 use crate::kernel::partition::{Partition, WorldId};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::collections::BTreeSet;
 
 /// One round's working state: the owner map being edited and the estimated loads.
 pub(super) struct Plan<'a> {
@@ -158,6 +159,13 @@ impl<'a> Plan<'a> {
     /// Gives cells of `g` face-adjacent to `r`'s territory, best first, until `r` reaches
     /// the mean, `g` falls to it, or `max_cells` moved.
     fn give_to(&mut self, g: WorldId, r: WorldId) {
+        // The candidates: `g`'s cells on its border with `r`, in ascending order. Only the
+        // given cell's face neighbours can join it, so it is kept up to date instead of
+        // scanning the grid for every cell given (a round moving ~250 of 4,608 cells took
+        // ~10 ms that way, with every worker waiting).
+        let mut frontier: BTreeSet<u32> = (0..self.owner.len() as u32)
+            .filter(|&c| self.owner[c as usize] == g && self.touches(c, r))
+            .collect();
         for _ in 0..self.balancer.config.max_cells {
             let (eg, er) = (self.est[g as usize], self.est[r as usize]);
             if eg - self.mean <= 0.0 || self.mean - er <= 0.0 {
@@ -165,14 +173,10 @@ impl<'a> Plan<'a> {
             }
             // Never so much that the recipient ends above the giver (no bouncing back).
             let fits = (eg - er) / 2.0;
-            let mut candidates: Vec<(usize, i64, f64, i32, u32, u32)> = (0..self.owner.len()
-                as u32)
-                .filter(|&c| {
-                    self.owner[c as usize] == g
-                        && !self.cooling(c)
-                        && self.cost[c as usize] <= fits
-                        && face_neighbours(self.grid, c).any(|x| self.owner[x as usize] == r)
-                })
+            let mut candidates: Vec<(usize, i64, f64, i32, u32, u32)> = frontier
+                .iter()
+                .copied()
+                .filter(|&c| !self.cooling(c) && self.cost[c as usize] <= fits)
                 .map(|c| {
                     (
                         foreign_neighbours(self.grid, &self.owner, c),
@@ -201,7 +205,14 @@ impl<'a> Plan<'a> {
                 return;
             };
             self.give(c, r);
+            frontier.remove(&c);
+            frontier.extend(face_neighbours(self.grid, c).filter(|&x| self.owner[x as usize] == g));
         }
+    }
+
+    /// Whether cell `c` has a face neighbour owned by `r`.
+    fn touches(&self, c: u32, r: WorldId) -> bool {
+        face_neighbours(self.grid, c).any(|x| self.owner[x as usize] == r)
     }
 
     /// Famine (§3.3.5): every world still underloaded after cession, least loaded first,
