@@ -175,8 +175,8 @@ struct Assembly<S> {
 
 struct Partial<S> {
     worlds: usize,
-    /// Each contributing world's states (any order).
-    states: Vec<Vec<S>>,
+    /// The contributing worlds' cells' states (any order), shared with their logs.
+    states: Vec<Arc<[S]>>,
     events: Vec<Event>,
 }
 
@@ -376,29 +376,23 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         if slot.contributed >= last {
             return;
         }
-        // Copied before taking the lock, so two worlds' copies do not wait for each other.
-        let mine: Vec<(Step, Vec<M::State>, Vec<Event>)> = (slot.contributed + 1..=last)
-            .map(|t| {
-                (
-                    t,
-                    slot.world.state_at(t).cloned().collect(),
-                    slot.world.events_at(t - 1).copied().collect(),
-                )
-            })
-            .collect();
         for t in slot.contributed + 1..=last {
             slot.world.note_committed(t);
         }
+        // The cells' states are handed over as shared references, not copied: a copy of a
+        // heavy world's ~1,000 states into fresh memory took ~3 ms now and then (page faults
+        // on memory the allocator had returned), holding up the world and its neighbours.
+        // The output stage flattens them when it sorts and hashes the frame.
         let mut assembly = self.assembly.lock();
-        for (t, states, events) in mine {
+        for t in slot.contributed + 1..=last {
             let part = assembly.partial.entry(t).or_insert_with(|| Partial {
                 worlds: 0,
                 states: Vec::new(),
                 events: Vec::new(),
             });
             part.worlds += 1;
-            part.states.push(states);
-            part.events.extend(events);
+            part.states.extend(slot.world.shared_states_at(t));
+            part.events.extend(slot.world.events_at(t - 1).copied());
         }
         slot.contributed = last;
         slot.world.sample_log_bytes();
@@ -589,7 +583,8 @@ fn finish_frame<M: CellModel>(
     p: Partial<M::State>,
     wanted: &StatesWanted,
 ) -> (Frame, Option<Vec<M::State>>) {
-    let (frame, sorted) = super::whole_frame::<M>(t, p.states.iter().flatten(), p.events);
+    let (frame, sorted) =
+        super::whole_frame::<M>(t, p.states.iter().flat_map(|c| c.iter()), p.events);
     let states = wanted
         .wants(t, frame.hash)
         .then(|| sorted.into_iter().cloned().collect());

@@ -694,6 +694,14 @@ impl<M: CellModel> World<M> {
             .flat_map(|s| s.states.iter().flat_map(view))
     }
 
+    /// Its own cells' states at step `t` (the non-empty cells, any order), shared with the
+    /// log rather than copied: for handing committed states to another thread.
+    pub fn shared_states_at(&self, t: Step) -> impl Iterator<Item = Arc<[M::State]>> + '_ {
+        self.slot(t)
+            .into_iter()
+            .flat_map(|s| s.states.iter().flatten().cloned())
+    }
+
     /// Its view of the state of own cell `cell` at step `t`, if held.
     pub fn cell_state(&self, cell: u32, t: Step) -> Option<&[M::State]> {
         if !self.is_own(cell) {
