@@ -36,16 +36,20 @@ fn balanced_case() -> impl Strategy<Value = (Case, BalanceConfig)> {
         0u64..3,
         1usize..40,
         any::<bool>(),
+        any::<bool>(),
     )
-        .prop_flat_map(|(scene, period, seed, cooldown, max_cells, backoff)| {
-            (
-                case(Just(scene), 8..40),
-                Just(BalanceConfig {
-                    backoff,
-                    ..seeded(period, seed, cooldown, max_cells)
-                }),
-            )
-        })
+        .prop_flat_map(
+            |(scene, period, seed, cooldown, max_cells, backoff, opening)| {
+                (
+                    case(Just(scene), 8..40),
+                    Just(BalanceConfig {
+                        backoff,
+                        opening,
+                        ..seeded(period, seed, cooldown, max_cells)
+                    }),
+                )
+            },
+        )
 }
 
 proptest! {
@@ -90,8 +94,8 @@ fn seeded_decisions_move_cells_and_fight_famine_with_reference_hashes() {
         assert_eq!(frames, expected, "seed {seed}");
         let c = run.counters().balance;
         assert_eq!(
-            c.rounds, 15,
-            "a round at steps 5, 10, ..., 75 (none after the last)"
+            c.rounds, 16,
+            "the opening round at step 0, then one at steps 5, 10, ..., 75 (none after the last)"
         );
         assert!(c.cells_moved > 0, "seed {seed}: no cell moved");
         assert!(c.famines > 0, "seed {seed}: no famine");
@@ -272,7 +276,8 @@ fn cli_balance_on_keeps_the_hash_and_draws_the_territories() {
     );
     assert_eq!(hash_line(&balanced), hash_line(&reference));
     let text = String::from_utf8_lossy(&balanced.stdout);
-    assert!(text.contains("balancing        5 rounds"), "{text}");
+    // The opening round at step 0, then rounds from step 5 on (backing off while idle).
+    assert!(text.contains("balancing        6 rounds"), "{text}");
     for f in [
         "territory-000000.svg",
         "territory-000005.svg",

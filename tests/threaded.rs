@@ -203,9 +203,12 @@ fn threaded_runs_with_balancing_on_match_the_reference_bitwise() {
                 };
                 // Every other case backs off while balanced (the default).
                 let backoff = k % 2 == 1;
+                // Every other run opens with a round at step 0 (the default).
+                let opening = threads % 2 == 1;
                 let balance = BalanceConfig {
                     period: 3 + k as u64 * 4,
                     backoff,
+                    opening,
                     load,
                     workers,
                     ..BalanceConfig::on()
@@ -223,7 +226,7 @@ fn threaded_runs_with_balancing_on_match_the_reference_bitwise() {
                 let got: Vec<u64> = report.frames.iter().map(|f| f.hash).collect();
                 assert_eq!(got, expected, "{name} {load:?} threads={threads} {mode:?}");
                 let b = &report.counters.balance;
-                let every_period = (steps - 1) / (3 + k as u64 * 4);
+                let every_period = (steps - 1) / (3 + k as u64 * 4) + opening as u64;
                 if backoff {
                     assert!(
                         (1..=every_period).contains(&b.rounds),

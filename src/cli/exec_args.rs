@@ -139,6 +139,11 @@ pub struct ExecutorArgs {
     /// the interval back to --balance-period. `off`: a round every period.
     #[arg(long, value_enum, value_name = "on|off")]
     pub balance_backoff: Option<SwitchArg>,
+    /// An opening round at step 0 [default: on]: before anything is computed, cells move
+    /// by each world's load estimated from its bodies, so a skewed scene starts balanced.
+    /// `off`: the first round waits a period for measured loads.
+    #[arg(long, value_enum, value_name = "on|off")]
+    pub balance_opening: Option<SwitchArg>,
     /// Load level thresholds as fractions of the mean load, `UNDER,HIGH,OVER`
     /// [default: 0.8,1.05,1.5]: below UNDER a world is underloaded, above HIGH highly loaded,
     /// above OVER overloaded.
@@ -212,6 +217,7 @@ impl ExecutorArgs {
             ("--balance", self.balance.is_some()),
             ("--balance-period", self.balance_period.is_some()),
             ("--balance-backoff", self.balance_backoff.is_some()),
+            ("--balance-opening", self.balance_opening.is_some()),
             ("--balance-thresholds", self.balance_thresholds.is_some()),
             ("--balance-smoothing", self.balance_smoothing.is_some()),
             ("--balance-cooldown", self.balance_cooldown.is_some()),
@@ -290,6 +296,7 @@ impl ExecutorArgs {
         };
         let tuning = self.balance_period.is_some()
             || self.balance_backoff.is_some()
+            || self.balance_opening.is_some()
             || self.balance_thresholds.is_some()
             || self.balance_smoothing.is_some()
             || self.balance_cooldown.is_some()
@@ -302,6 +309,9 @@ impl ExecutorArgs {
         }
         if let Some(backoff) = self.balance_backoff {
             b.backoff = backoff == SwitchArg::On;
+        }
+        if let Some(opening) = self.balance_opening {
+            b.opening = opening == SwitchArg::On;
         }
         if let Some(t) = &self.balance_thresholds {
             let v: Vec<f64> = t

@@ -135,13 +135,50 @@ pub(crate) fn balance_round<'a, M: CellModel + 'a>(
     step: Step,
 ) -> Option<Arc<Partition>> {
     let mut worlds: Vec<&mut World<M>> = worlds.into_iter().collect();
+    let bodies = body_counts(grid, &worlds, step);
+    let new = balancer.round(grid, partition, loads, leads, &bodies, step)?;
+    Some(take_territories(grid, &mut worlds, new, step))
+}
+
+/// The opening balancing round at step 0 ([`Balancer::opening_round`]): loads estimated from
+/// the bodies, nothing computed yet. Returns the new partition if cells moved; the caller
+/// then lets the worlds [`World::start`] (again).
+pub(crate) fn opening_round<'a, M: CellModel + 'a>(
+    balancer: &mut Balancer,
+    grid: &Grid,
+    partition: &Partition,
+    worlds: impl IntoIterator<Item = &'a mut World<M>>,
+) -> Option<Arc<Partition>> {
+    let mut worlds: Vec<&mut World<M>> = worlds.into_iter().collect();
+    let bodies = body_counts(grid, &worlds, 0);
+    let new = balancer.opening_round(grid, partition, &bodies)?;
+    Some(take_territories(grid, &mut worlds, new, 0))
+}
+
+/// The bodies in every cell at `step`, counted in the worlds' logs (nothing is copied: a
+/// round that moves no cell needs only these).
+fn body_counts<M: CellModel>(grid: &Grid, worlds: &[&mut World<M>], step: Step) -> Vec<u32> {
+    let mut bodies = vec![0u32; grid.cell_count()];
+    for w in worlds {
+        for &c in w.cells() {
+            bodies[c as usize] = w.cell_state(c, step).map_or(0, |s| s.len() as u32);
+        }
+    }
+    bodies
+}
+
+/// Every world takes its territory in `new` at `step`, with the final states gathered from
+/// the worlds' logs ([`World::reterritory`]).
+fn take_territories<M: CellModel>(
+    grid: &Grid,
+    worlds: &mut [&mut World<M>],
+    new: Partition,
+    step: Step,
+) -> Arc<Partition> {
     let states = gather_states(grid, worlds.iter().map(|w| &**w), step);
-    let bodies: Vec<u32> = (0..grid.cell_count())
-        .map(|c| states.cell_at(c).len() as u32)
-        .collect();
-    let new = Arc::new(balancer.round(grid, partition, loads, leads, &bodies, step)?);
+    let new = Arc::new(new);
     for w in worlds.iter_mut() {
         w.reterritory(new.clone(), &states, step);
     }
-    Some(new)
+    new
 }

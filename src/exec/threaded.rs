@@ -646,6 +646,11 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         balance.workers = threads;
     }
     let mut balancer = Balancer::new(&balance, grid.cell_count());
+    if balancer.opens() {
+        if let Some(p) = super::opening_round(&mut balancer, &grid, &partition, worlds.iter_mut()) {
+            partition = p;
+        }
+    }
     let mut epoch_end = steps.min(balancer.next_round_after(0));
     let mut inboxes: Vec<Vec<Message<M::State>>> = (0..n).map(|_| Vec::new()).collect();
     for w in &mut worlds {

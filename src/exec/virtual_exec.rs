@@ -200,7 +200,12 @@ impl<M: CellModel> VirtualRun<M> {
             mut worlds,
             events,
         } = super::build_worlds(model, grid, initial, config);
-        let balancer = Balancer::new(&config.balance, grid.cell_count());
+        let mut balancer = Balancer::new(&config.balance, grid.cell_count());
+        let partition = match balancer.opens() {
+            true => super::opening_round(&mut balancer, &grid, &partition, worlds.iter_mut())
+                .unwrap_or(partition),
+            false => partition,
+        };
         let computed_at_round = vec![0; worlds.len()];
         let mut run = VirtualRun {
             config: config.clone(),

@@ -297,6 +297,10 @@ pub struct BalanceConfig {
     /// that moves cells brings the interval back to `period`. Each round is a barrier for
     /// the threaded executor, so rounds that find nothing to do are not free.
     pub backoff: bool,
+    /// An opening round at step 0 (`--balance-opening`), before anything is computed, with
+    /// each world's load estimated from its bodies (SPEC.md §K13): a skewed scene starts
+    /// balanced instead of waiting a period for the first measurement.
+    pub opening: bool,
     /// A world whose smoothed load is below this fraction of the mean is underloaded.
     pub underloaded: f64,
     /// Above this multiple of the mean a world is highly loaded (it gives cells to
@@ -333,6 +337,7 @@ impl Default for BalanceConfig {
             enabled: false,
             period: 20,
             backoff: true,
+            opening: true,
             underloaded: 0.8,
             high: 1.05,
             overloaded: 1.5,

@@ -54,7 +54,8 @@ pub struct RoundRecord {
     pub leads: Vec<f64>,
     /// Each world's bodies at the round's step, before cells moved.
     pub bodies: Vec<u64>,
-    /// Each world's level from its smoothed load, before cells moved.
+    /// Each world's level from its smoothed load (its worker share's when worlds share
+    /// workers, SPEC.md §K13), before cells moved.
     pub levels: Vec<LoadLevel>,
     /// Cells that changed owner.
     pub cells_moved: u64,
@@ -108,6 +109,12 @@ impl Balancer {
         self.config.enabled
     }
 
+    /// Whether an opening round is due at step 0 (balancing on, with
+    /// [`BalanceConfig::opening`]).
+    pub fn opens(&self) -> bool {
+        self.config.enabled && self.config.opening
+    }
+
     /// The next committed step at which a round happens after `step`.
     pub fn next_round_after(&self, step: Step) -> Step {
         if !self.config.enabled {
@@ -117,6 +124,28 @@ impl Balancer {
             Some(last) if self.config.backoff => (last.step + self.interval).max(step + 1),
             _ => (step / self.config.period + 1) * self.config.period,
         }
+    }
+
+    /// The opening round, at step 0 before anything is computed (SPEC.md §K13). Nothing has
+    /// been measured yet, so each world's load is estimated from its bodies: the sum of its
+    /// cells' weights (a cell's bodies times one plus its neighbourhood's, as a plan weighs
+    /// cells). The estimate is not a measurement: it seeds no smoothing and starts no
+    /// backoff, so the first measured round comes one period later whatever it did.
+    pub fn opening_round(
+        &mut self,
+        grid: &Grid,
+        part: &Partition,
+        bodies: &[u32],
+    ) -> Option<Partition> {
+        let n = part.worlds();
+        let mut estimate = vec![0.0; n];
+        for (c, w) in plan::cell_weights(grid, bodies).into_iter().enumerate() {
+            estimate[part.owner(c as u32) as usize] += w;
+        }
+        let moved = self.round(grid, part, &estimate, &vec![0.0; n], bodies, 0);
+        self.smoothed = None;
+        self.interval = self.config.period;
+        moved
     }
 
     /// Where loads come from.
@@ -193,13 +222,12 @@ impl Balancer {
                 .collect(),
             None => loads.clone(),
         };
-        let mean = est.iter().sum::<f64>() / self.sharers(n) as f64;
-        let levels = est.iter().map(|&l| self.level(l, mean)).collect();
         let mut world_bodies = vec![0u64; n];
         for (c, &b) in bodies.iter().enumerate() {
             world_bodies[part.owner(c as u32) as usize] += b as u64;
         }
         let mut plan = Plan::new(self, grid, part, est, bodies);
+        let levels = plan.levels();
         if plan.mean > 0.0 {
             plan.cede();
             plan.fight_famine();
@@ -426,5 +454,91 @@ mod tests {
         // More workers than worlds, or 0, mean one share per world.
         let b = Balancer::new(&BalanceConfig::on(), g.cell_count());
         assert_eq!(b.sharers(3), 3);
+    }
+
+    #[test]
+    fn worlds_pack_into_worker_shares_most_loaded_first_into_the_lightest() {
+        let tie = [0, 0, 0, 0];
+        assert_eq!(plan::pack(&[5.0, 4.0, 1.0, 0.1], 2, &tie), vec![0, 1, 1, 0]);
+        assert_eq!(
+            plan::pack(&[5.0, 4.0, 1.0], 3, &tie),
+            vec![0, 1, 2],
+            "own shares"
+        );
+        assert_eq!(plan::pack(&[5.0, 4.0], 8, &tie), vec![0, 1], "more workers");
+    }
+
+    #[test]
+    fn a_share_above_the_mean_gives_to_the_other_share_though_not_underloaded() {
+        // A row of 40 cells, one body each: world 0 owns 0..20, world 1 20..39, world 2
+        // cell 39. Two workers pack world 0 (4.6) against worlds 1 + 2 (4.4 + 1.0 = 5.4):
+        // the second share is high (above 1.05 × 5), the first only normal (0.92 × 5).
+        let g = Grid::covering(Vec3::zeros(), Vec3::new(40.0, 1.0, 1.0), 1.0);
+        let owners: Vec<WorldId> = (0..40)
+            .map(|c| (c >= 20) as u32 + (c == 39) as u32)
+            .collect();
+        let p = Partition::from_owners(&g, 3, owners);
+        let bodies = vec![1u32; 40];
+        let config = BalanceConfig {
+            workers: 2,
+            smoothing: 1.0,
+            ..BalanceConfig::on()
+        };
+        let mut b = Balancer::new(&config, g.cell_count());
+        let new = b
+            .round(&g, &p, &[4.6, 4.4, 1.0], &[0.0; 3], &bodies, 20)
+            .expect("the high share gives");
+        let r = &b.history()[0];
+        assert_eq!(
+            r.levels,
+            vec![LoadLevel::Normal, LoadLevel::High, LoadLevel::High]
+        );
+        assert_eq!(new.owner(20), 0, "world 1's border cell goes to world 0");
+        assert_eq!(
+            r.cells_moved, 1,
+            "one cell (0.23) brings the shares within 0.17 of 5"
+        );
+        // One share per world (the thesis's levels): world 0 is not underloaded, so world 1
+        // gives it nothing (it gives to world 2, which then fights famine).
+        let mut b = Balancer::new(
+            &BalanceConfig {
+                workers: 3,
+                ..config
+            },
+            g.cell_count(),
+        );
+        let new = b.round(&g, &p, &[4.6, 4.4, 1.0], &[0.0; 3], &bodies, 20);
+        assert!(new.is_none_or(|n| n.owner(20) == 1));
+    }
+
+    #[test]
+    fn the_opening_round_moves_cells_by_bodies_and_neither_smooths_nor_backs_off() {
+        let (g, p, bodies) = row();
+        let config = BalanceConfig {
+            smoothing: 0.5,
+            cooldown: 0,
+            ..BalanceConfig::on()
+        };
+        let mut b = Balancer::new(&config, g.cell_count());
+        let new = b
+            .opening_round(&g, &p, &bodies)
+            .expect("all bodies in world 0");
+        assert!(new.cells_of(1).len() > p.cells_of(1).len());
+        let r = &b.history()[0];
+        assert_eq!((r.step, r.levels[0]), (0, LoadLevel::Overloaded));
+        assert_eq!(
+            b.next_round_after(0),
+            config.period,
+            "the first measured round"
+        );
+        // The first measured round is taken as measured: [3.2, 0.8] against a mean of 2 is
+        // overloaded, not averaged with the estimate (in bodies, another unit).
+        b.round(&g, &new, &[3.2, 0.8], &[0.0; 2], &bodies, config.period);
+        assert_eq!(b.history()[1].levels[0], LoadLevel::Overloaded);
+        // Bodies spread evenly: nothing moves, and no backoff either.
+        let even = vec![1u32; 8];
+        let mut b = Balancer::new(&config, g.cell_count());
+        assert!(b.opening_round(&g, &p, &even).is_none());
+        assert_eq!(b.next_round_after(0), config.period);
     }
 }

@@ -14,11 +14,54 @@ use rand_chacha::ChaCha8Rng;
 use std::collections::BTreeSet;
 
 /// One round's working state: the owner map being edited and the estimated loads.
+/// Each cell's weight, the share of its world's load a plan assigns it: its bodies times one
+/// plus the bodies in its 26 neighbour cells (a body's cost grows with the contacts it may
+/// have).
+pub(super) fn cell_weights(grid: &Grid, bodies: &[u32]) -> Vec<f64> {
+    (0..grid.cell_count())
+        .map(|c| {
+            let own = bodies[c] as f64;
+            let around: f64 = grid
+                .neighbours(grid.coord(c))
+                .map(|x| bodies[grid.index(x)] as f64)
+                .sum();
+            own * (1.0 + around)
+        })
+        .collect()
+}
+
+/// Packs the worlds into `workers` shares, most loaded world first into the least loaded
+/// share (longest processing time first, as the threaded executor's ready set runs the
+/// longest computation first): the load each worker will carry. With at least as many
+/// workers as worlds each world is its own share.
+pub(super) fn pack(est: &[f64], workers: usize, tie: &[u32]) -> Vec<usize> {
+    if workers >= est.len() {
+        return (0..est.len()).collect();
+    }
+    let mut order: Vec<usize> = (0..est.len()).collect();
+    order.sort_by(|&a, &b| est[b].total_cmp(&est[a]).then(tie[a].cmp(&tie[b])));
+    let mut load = vec![0.0f64; workers];
+    let mut worker = vec![0; est.len()];
+    for w in order {
+        let k = (0..workers)
+            .min_by(|&x, &y| load[x].total_cmp(&load[y]).then(x.cmp(&y)))
+            .expect("at least one worker");
+        worker[w] = k;
+        load[k] += est[w];
+    }
+    worker
+}
+
 pub(super) struct Plan<'a> {
     balancer: &'a Balancer,
     grid: &'a Grid,
     pub(super) owner: Vec<WorldId>,
     pub(super) est: Vec<f64>,
+    /// The worker share each world is packed into ([`pack`]); each world is its own share
+    /// when there are as many workers as worlds.
+    worker: Vec<usize>,
+    /// Each worker share's load: the sum of its worlds' `est`.
+    worker_load: Vec<f64>,
     cost: Vec<f64>,
     tie: Vec<u32>,
     world_tie: Vec<u32>,
@@ -43,16 +86,7 @@ impl<'a> Plan<'a> {
         let world_tie: Vec<u32> = (0..est.len()).map(|_| rng.random()).collect();
         // A cell's computing cost: its bodies times the bodies around it (the pairs its
         // broad phase checks), scaled so a world's cells sum to the world's load.
-        let weight: Vec<f64> = (0..cells)
-            .map(|c| {
-                let own = bodies[c] as f64;
-                let around: f64 = grid
-                    .neighbours(grid.coord(c))
-                    .map(|x| bodies[grid.index(x)] as f64)
-                    .sum();
-                own * (1.0 + around)
-            })
-            .collect();
+        let weight = cell_weights(grid, bodies);
         let mut sum = vec![0.0; est.len()];
         let mut count = vec![0usize; est.len()];
         for c in 0..cells {
@@ -69,12 +103,20 @@ impl<'a> Plan<'a> {
                 }
             })
             .collect();
-        let mean = est.iter().sum::<f64>() / balancer.sharers(est.len()) as f64;
+        let sharers = balancer.sharers(est.len());
+        let mean = est.iter().sum::<f64>() / sharers as f64;
+        let worker = pack(&est, sharers, &world_tie);
+        let mut worker_load = vec![0.0; sharers];
+        for (w, &k) in worker.iter().enumerate() {
+            worker_load[k] += est[w];
+        }
         Plan {
             balancer,
             grid,
             owner,
             est,
+            worker,
+            worker_load,
             cost,
             tie,
             world_tie,
@@ -83,8 +125,26 @@ impl<'a> Plan<'a> {
         }
     }
 
+    /// World `w`'s level: that of its worker share's load.
     fn level(&self, w: WorldId) -> LoadLevel {
-        self.balancer.level(self.est[w as usize], self.mean)
+        self.balancer.level(self.share_load(w), self.mean)
+    }
+
+    /// Every world's level, before anything moves.
+    pub(super) fn levels(&self) -> Vec<LoadLevel> {
+        (0..self.est.len() as WorldId)
+            .map(|w| self.level(w))
+            .collect()
+    }
+
+    /// The load of world `w`'s worker share.
+    fn share_load(&self, w: WorldId) -> f64 {
+        self.worker_load[self.worker[w as usize]]
+    }
+
+    /// Whether worlds share workers (fewer workers than worlds, SPEC.md §K13).
+    fn packing(&self) -> bool {
+        self.worker_load.len() < self.est.len()
     }
 
     fn cooling(&self, c: u32) -> bool {
@@ -94,8 +154,11 @@ impl<'a> Plan<'a> {
 
     fn give(&mut self, c: u32, to: WorldId) {
         let from = self.owner[c as usize];
-        self.est[from as usize] -= self.cost[c as usize];
-        self.est[to as usize] += self.cost[c as usize];
+        let cost = self.cost[c as usize];
+        self.est[from as usize] -= cost;
+        self.est[to as usize] += cost;
+        self.worker_load[self.worker[from as usize]] -= cost;
+        self.worker_load[self.worker[to as usize]] += cost;
         self.owner[c as usize] = to;
     }
 
@@ -110,7 +173,10 @@ impl<'a> Plan<'a> {
     }
 
     /// Cession (§3.3.5): every high or overloaded world, most loaded first, gives cells to
-    /// its less-loaded face neighbours.
+    /// its less-loaded face neighbours. When worlds share workers, levels are those of the
+    /// worker shares, a world gives only to worlds of another share, and a high share gives
+    /// to any share below the mean (with two shares, one 10 % above the mean has the other
+    /// 10 % below it: never underloaded, yet the run waits for the heavier).
     pub(super) fn cede(&mut self) {
         let n = self.est.len() as WorldId;
         let mut givers: Vec<WorldId> = (0..n)
@@ -130,8 +196,10 @@ impl<'a> Plan<'a> {
                 neighbour_worlds(self.grid, &self.owner, g)
                     .into_iter()
                     .filter(|&r| {
-                        self.est[r as usize] < self.mean
+                        self.worker[r as usize] != self.worker[g as usize]
+                            && self.share_load(r) < self.mean
                             && (level == LoadLevel::Overloaded
+                                || self.packing()
                                 || self.level(r) == LoadLevel::Underloaded)
                     })
                     .map(|r| {
@@ -167,7 +235,7 @@ impl<'a> Plan<'a> {
             .filter(|&c| self.owner[c as usize] == g && self.touches(c, r))
             .collect();
         for _ in 0..self.balancer.config.max_cells {
-            let (eg, er) = (self.est[g as usize], self.est[r as usize]);
+            let (eg, er) = (self.share_load(g), self.share_load(r));
             if eg - self.mean <= 0.0 || self.mean - er <= 0.0 {
                 return;
             }
