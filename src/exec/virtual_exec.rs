@@ -201,11 +201,14 @@ impl<M: CellModel> VirtualRun<M> {
             events,
         } = super::build_worlds(model, grid, initial, config);
         let mut balancer = Balancer::new(&config.balance, grid.cell_count());
-        let partition = match balancer.opens() {
-            true => super::opening_round(&mut balancer, &grid, &partition, worlds.iter_mut())
-                .unwrap_or(partition),
-            false => partition,
-        };
+        let mut partition = partition;
+        if balancer.opens() {
+            if let Some(p) =
+                super::opening_round(&mut balancer, &grid, &partition, worlds.iter_mut())
+            {
+                partition = p;
+            }
+        }
         let computed_at_round = vec![0; worlds.len()];
         let mut run = VirtualRun {
             config: config.clone(),
