@@ -82,7 +82,7 @@ fn main() {
         overloaded: 1e12,
         ..every_period.clone()
     };
-    let run = |balance: &BalanceConfig| -> ThreadedReport {
+    let run = |balance: &BalanceConfig| -> ThreadedReport<soda::EventKind> {
         let config = KernelConfig::new(worlds)
             .mode(RollbackMode::Cell)
             .window(16)

@@ -35,7 +35,7 @@ use rapier_world::RapierWorld;
 use common::{measure_pile, soda_pile, Footprint, PileBody, PileMetrics};
 use knobs::median;
 use serde::Serialize;
-use soda::frame::EventKind;
+use soda::EventKind;
 use soda::physics::Body;
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;

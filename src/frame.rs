@@ -3,32 +3,28 @@
 use crate::model::{BodyId, Step};
 use serde::{Deserialize, Serialize};
 
-/// Why a body's motion was altered or ended by a rule rather than by physics.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum EventKind {
-    /// The body's speed or per-step displacement exceeded the grid's allowance and was
-    /// capped (SPEC.md §Grid).
-    SpeedCapped,
-    /// The body's centre left the domain; it was removed.
-    LeftDomain,
-}
+/// The kernel's own event: an entity whose home position lies outside the grid was removed
+/// (SPEC.md §3, "Leaving the grid"). Every model's event type converts from it
+/// ([`crate::CellModel::Event`]); a model without events of its own uses `LeftGrid` itself.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+pub struct LeftGrid;
 
-/// An event raised while computing step `step` → `step + 1`.
+/// An event raised while computing step `step` → `step + 1`: what happened (`kind`, the
+/// model's own event type, [`crate::CellModel::Event`]) to which entity.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-pub struct Event {
+pub struct Event<K> {
     /// The step being computed.
     pub step: Step,
-    /// The body concerned.
+    /// The entity concerned.
     pub body: BodyId,
     /// What happened.
-    pub kind: EventKind,
+    pub kind: K,
 }
 
 /// One committed step: the canonical hash of the state at `step`, and what happened while
 /// computing it from `step - 1` (events sorted by (body, kind)).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Frame {
+pub struct Frame<K> {
     /// The step this frame describes.
     pub step: Step,
     /// Canonical state hash at `step`.
@@ -36,7 +32,7 @@ pub struct Frame {
     /// Number of bodies at `step`.
     pub bodies: usize,
     /// Events raised computing `step - 1` → `step`.
-    pub events: Vec<Event>,
+    pub events: Vec<Event<K>>,
 }
 
 /// Which committed steps a frame sink wants the full states of; every other step reaches

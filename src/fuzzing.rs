@@ -267,7 +267,7 @@ fn compare<M: CellModel + Clone>(
     case: &SyncOrderCase,
 ) -> Result<(), String> {
     let (mut reference, _) = ReferenceRun::new(model.clone(), grid.clone(), bodies.clone());
-    let expected: Vec<Frame> = (0..case.steps).map(|_| reference.advance()).collect();
+    let expected: Vec<Frame<M::Event>> = (0..case.steps).map(|_| reference.advance()).collect();
     let (mut run, _) = VirtualRun::new(model, grid, bodies, &case.config);
     let frames = run.run(case.steps);
     let c = &case.config;

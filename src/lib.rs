@@ -26,12 +26,30 @@ pub mod scaling;
 pub mod scene;
 pub mod sim;
 pub mod state;
+pub mod verify;
 
+/// The generic path in one import: implement [`CellModel`], run it with [`Runner`] on any
+/// executor, check it with [`verify`](crate::verify).
+pub mod prelude {
+    pub use crate::exec::control::RunControl;
+    pub use crate::exec::error::{ContractRule, ContractViolation, ExecError, InputError};
+    pub use crate::frame::{Event, Frame, LeftGrid, StatesWanted};
+    pub use crate::grid::{CellCoord, Grid};
+    pub use crate::hash::StateHash;
+    pub use crate::kernel::{GhostPolicy, Input, KernelConfig, PartitionKind, RollbackMode};
+    pub use crate::model::{exact_f32, BodyId, CellModel, Neighbourhood, Step};
+    pub use crate::sim::{run_model, ExecutorKind, ModelReport, RunOptions, Runner};
+    pub use crate::verify::{verify, VerifyOptions, VerifyReport, VerifySetup};
+}
+
+pub use exec::control::RunControl;
+pub use exec::error::{ExecError, InputError};
 pub use exec::reference::ReferenceRun;
-pub use frame::{Event, EventKind, Frame};
+pub use frame::{Event, Frame, LeftGrid};
 pub use grid::{CellCoord, Grid};
 pub use hash::StateHash;
 pub use model::{BodyId, CellModel, Neighbourhood, Step};
+pub use physics::EventKind;
 pub use physics::{Body, RigidBodyModel, Shape};
 pub use scene::{Scene, SceneBuilder, SceneError};
-pub use sim::{RunReport, Simulation, StateReport};
+pub use sim::{run_model, ModelReport, RunOptions, RunReport, Runner, Simulation, StateReport};

@@ -2,7 +2,7 @@
 //! between cells and asks the model to step one cell from its 27-cell neighbourhood.
 //! The kernel never knows it is running physics.
 
-use crate::frame::Event;
+use crate::frame::{Event, LeftGrid};
 use crate::grid::{CellCoord, Grid};
 use crate::hash::StateHash;
 use std::fmt::Debug;
@@ -52,6 +52,13 @@ pub trait CellModel: Send + Sync {
     /// The state of one entity, moved between cells and worlds by the kernel.
     type State: Clone + PartialEq + Debug + Send + Sync + 'static;
 
+    /// What the model reports happened to an entity during a step (e.g. an infection, a
+    /// birth, a capped speed), collected into committed frames in (step, entity, kind)
+    /// order. It converts from the kernel's own [`LeftGrid`] event, raised when an entity's
+    /// home position lies outside the grid; a model without events of its own uses
+    /// `type Event = LeftGrid;`.
+    type Event: From<LeftGrid> + Clone + Ord + Debug + Send + Sync + 'static;
+
     /// The entity's id.
     fn id(state: &Self::State) -> BodyId;
 
@@ -67,7 +74,7 @@ pub trait CellModel: Send + Sync {
         grid: &Grid,
         nb: &Neighbourhood<'_, Self::State>,
         out: &mut Vec<Self::State>,
-        events: &mut Vec<Event>,
+        events: &mut Vec<Event<Self::Event>>,
     );
 
     /// Whether computing the cell that homes `reader` may read `other`, the state of an
@@ -103,6 +110,12 @@ pub trait CellModel: Send + Sync {
     /// bits. The default is the whole state as one field.
     fn fields(state: &Self::State) -> Vec<(String, String)> {
         vec![("state".to_string(), format!("{state:?}"))]
+    }
+
+    /// The name an event kind is counted under in reports (`RunReport::events`). The
+    /// default is its `Debug` form.
+    fn event_name(kind: &Self::Event) -> String {
+        format!("{kind:?}")
     }
 }
 

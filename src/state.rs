@@ -1,7 +1,7 @@
 //! The whole domain's state at one step, kept per cell: each cell holds the entities homed
 //! in it, sorted by id.
 
-use crate::frame::{Event, EventKind};
+use crate::frame::{Event, LeftGrid};
 use crate::grid::{CellCoord, Grid};
 use crate::hash::StateHash;
 use crate::model::{CellModel, Neighbourhood, Step};
@@ -22,13 +22,13 @@ impl<S: Clone> CellStates<S> {
         }
     }
 
-    /// Bins `states` by home cell. Entities outside the grid are returned as `LeftDomain`
+    /// Bins `states` by home cell. Entities outside the grid are returned as [`LeftGrid`]
     /// events at `step` and dropped.
     pub fn binned<M: CellModel<State = S>>(
         grid: &Grid,
         states: impl IntoIterator<Item = S>,
         step: Step,
-        events: &mut Vec<Event>,
+        events: &mut Vec<Event<M::Event>>,
     ) -> Self {
         let mut me = Self::empty(grid);
         for s in states {
@@ -40,7 +40,7 @@ impl<S: Clone> CellStates<S> {
                 None => events.push(Event {
                     step,
                     body: M::id(&s),
-                    kind: EventKind::LeftDomain,
+                    kind: LeftGrid.into(),
                 }),
             }
         }

@@ -75,7 +75,13 @@ fn crowded_corner() -> (Particles, Grid, Vec<Particle>) {
     (m, g, b)
 }
 
-fn run_virtual(config: &KernelConfig, steps: u64) -> (VirtualRun<Particles>, Vec<soda::Frame>) {
+fn run_virtual(
+    config: &KernelConfig,
+    steps: u64,
+) -> (
+    VirtualRun<Particles>,
+    Vec<soda::Frame<soda::kernel::synthetic::ParticleEvent>>,
+) {
     let (m, g, b) = crowded_corner();
     let (mut run, _) = VirtualRun::new(m, g, b, config);
     let frames = run.run(steps);

@@ -110,6 +110,7 @@ struct PanicAt {
 
 impl CellModel for PanicAt {
     type State = (BodyId, [f32; 3]);
+    type Event = soda::LeftGrid;
     fn id(s: &Self::State) -> BodyId {
         s.0
     }
@@ -122,7 +123,7 @@ impl CellModel for PanicAt {
         _grid: &Grid,
         nb: &Neighbourhood<'_, Self::State>,
         out: &mut Vec<Self::State>,
-        _events: &mut Vec<Event>,
+        _events: &mut Vec<Event<soda::LeftGrid>>,
     ) {
         if step == self.step {
             panic!("planted panic at step {step}");

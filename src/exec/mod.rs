@@ -2,6 +2,9 @@
 //! frames; the reference is the oracle.
 
 pub mod clock;
+pub mod contract;
+pub mod control;
+pub mod error;
 pub mod reference;
 mod schedule;
 pub mod sync;
@@ -16,14 +19,44 @@ use crate::model::{CellModel, Step};
 use crate::state::{canonical_hash, sorted_by_id, CellStates};
 use std::sync::Arc;
 
+/// Checks an input against the rules every executor applies: not at step 0, not before
+/// `floor` (the earliest step still open), every added entity inside the grid.
+pub(crate) fn check_input<M: CellModel>(
+    grid: &Grid,
+    floor: Step,
+    step: Step,
+    input: &crate::kernel::Input<M::State>,
+) -> Result<(), error::InputError> {
+    use crate::kernel::Input;
+    if step == 0 {
+        return Err(error::InputError::StepZero);
+    }
+    if step < floor {
+        return Err(error::InputError::TooLate {
+            step,
+            earliest: floor,
+        });
+    }
+    if let Input::Spawn(s) | Input::Replace(s) = input {
+        if grid.cell_of(M::position(s)).is_none() {
+            return Err(error::InputError::OutsideGrid {
+                step,
+                id: M::id(s),
+                position: M::position(s),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// The committed frame of step `t` from every world's states (any order) and events: the
 /// states sorted by id and hashed as the reference hashes them, the events sorted. Returns
 /// the sorted states too ([`sorted_by_id`]).
 pub(crate) fn whole_frame<'a, M: CellModel>(
     t: Step,
     states: impl IntoIterator<Item = &'a M::State>,
-    mut events: Vec<Event>,
-) -> (Frame, Vec<&'a M::State>) {
+    mut events: Vec<Event<M::Event>>,
+) -> (Frame<M::Event>, Vec<&'a M::State>) {
     let sorted = sorted_by_id::<M>(states);
     events.sort();
     let frame = Frame {
@@ -44,7 +77,7 @@ pub(crate) struct Worlds<M: CellModel> {
     /// One world per territory, ascending id, at step 0.
     pub worlds: Vec<World<M>>,
     /// `LeftDomain` events of initial states outside the grid (they are dropped).
-    pub events: Vec<Event>,
+    pub events: Vec<Event<M::Event>>,
 }
 
 /// Bins `initial`, partitions the grid with `config` (at least one world) and builds every

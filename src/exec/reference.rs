@@ -1,10 +1,17 @@
 //! The reference executor: one thread, no worlds. Each step computes every occupied cell in
-//! topological order from the previous step's state, then re-bins bodies by home cell.
+//! topological order from the previous step's state, re-bins entities by home cell, then
+//! applies the inputs of the new step (SPEC.md §8).
 
+use super::contract::{self, CellResult};
+use super::error::{ExecError, InputError};
+use super::sync::panic_message;
 use crate::frame::{Event, Frame};
 use crate::grid::Grid;
-use crate::model::{CellModel, Step};
+use crate::kernel::Input;
+use crate::model::{BodyId, CellModel, Step};
 use crate::state::CellStates;
+use std::collections::{BTreeMap, BTreeSet};
+use std::panic::{catch_unwind, AssertUnwindSafe};
 
 /// The single-threaded reference run of a cell model.
 pub struct ReferenceRun<M: CellModel> {
@@ -13,6 +20,10 @@ pub struct ReferenceRun<M: CellModel> {
     state: CellStates<M::State>,
     step: Step,
     costs: Option<Vec<CellCost>>,
+    /// Inputs not yet applied, by step, in the order they were added.
+    inputs: BTreeMap<Step, Vec<Input<M::State>>>,
+    /// Whether every step is checked against the model contract ([`contract`]).
+    check: bool,
 }
 
 /// The measured cost of one cell computation (for the scalability model, `crate::scaling`).
@@ -28,8 +39,8 @@ pub struct CellCost {
 
 impl<M: CellModel> ReferenceRun<M> {
     /// A run starting at step 0 from `initial`. Entities outside the grid are reported as
-    /// `LeftDomain` events in the returned list.
-    pub fn new(model: M, grid: Grid, initial: Vec<M::State>) -> (Self, Vec<Event>) {
+    /// [`LeftGrid`](crate::frame::LeftGrid) events in the returned list.
+    pub fn new(model: M, grid: Grid, initial: Vec<M::State>) -> (Self, Vec<Event<M::Event>>) {
         let mut events = Vec::new();
         let state = CellStates::binned::<M>(&grid, initial, 0, &mut events);
         (
@@ -39,6 +50,8 @@ impl<M: CellModel> ReferenceRun<M> {
                 state,
                 step: 0,
                 costs: None,
+                inputs: BTreeMap::new(),
+                check: false,
             },
             events,
         )
@@ -53,6 +66,29 @@ impl<M: CellModel> ReferenceRun<M> {
     /// The cell costs recorded so far, in computation order.
     pub fn take_costs(&mut self) -> Vec<CellCost> {
         self.costs.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
+    /// Turns the contract checker on (or off): from now on every step checks unique ids,
+    /// one-cell moves, id-sorted outputs, and computes every cell a second time in a
+    /// shuffled order to check that `step_cell` reads nothing but its neighbourhood
+    /// (about twice the cost). A violation makes [`try_advance`](Self::try_advance) return
+    /// [`ExecError::Contract`]. Turning it on checks the current state's ids at once.
+    pub fn check_contract(&mut self, on: bool) -> Result<(), ExecError> {
+        self.check = on;
+        if on {
+            contract::check_unique_ids::<M>(&self.grid, &self.state, self.step)?;
+        }
+        Ok(())
+    }
+
+    /// Schedules an input at step `step` (at least the next step): it applies to the state of
+    /// that step once computed, before it is used, with the kernel's rule (SPEC.md §K12):
+    /// all removals at a step first (a replacement removes its id), then all additions in the
+    /// order they were added.
+    pub fn add_input(&mut self, step: Step, input: Input<M::State>) -> Result<(), InputError> {
+        super::check_input::<M>(&self.grid, self.step + 1, step, &input)?;
+        self.inputs.entry(step).or_default().push(input);
+        Ok(())
     }
 
     /// The current step.
@@ -76,7 +112,7 @@ impl<M: CellModel> ReferenceRun<M> {
     }
 
     /// The frame of the current state (no events).
-    pub fn frame(&self) -> Frame {
+    pub fn frame(&self) -> Frame<M::Event> {
         Frame {
             step: self.step,
             hash: self.state.hash::<M>(),
@@ -86,15 +122,35 @@ impl<M: CellModel> ReferenceRun<M> {
     }
 
     /// Computes one step and returns its committed frame.
-    pub fn advance(&mut self) -> Frame {
+    ///
+    /// # Panics
+    /// If [`try_advance`](Self::try_advance) fails (the model panicked or broke the
+    /// contract), with its message.
+    pub fn advance(&mut self) -> Frame<M::Event> {
+        self.try_advance().unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// Computes one step and returns its committed frame; a panic of the model is an
+    /// [`ExecError::CellPanicked`] naming the cell and step, a contract violation (when
+    /// checked) an [`ExecError::Contract`]. After an error the run stays at its last step.
+    pub fn try_advance(&mut self) -> Result<Frame<M::Event>, ExecError> {
         let mut next = Vec::with_capacity(self.state.len());
         let mut events = Vec::new();
+        let mut firsts: Vec<CellResult<M>> = Vec::new();
         for i in self.state.occupied() {
             let c = self.grid.coord(i);
             let nb = self.state.neighbourhood(&self.grid, c);
             let t0 = self.costs.is_some().then(std::time::Instant::now);
-            self.model
-                .step_cell(self.step, &self.grid, &nb, &mut next, &mut events);
+            let (start, first_event) = (next.len(), events.len());
+            let (model, grid, step) = (&self.model, &self.grid, self.step);
+            catch_unwind(AssertUnwindSafe(|| {
+                model.step_cell(step, grid, &nb, &mut next, &mut events)
+            }))
+            .map_err(|p| ExecError::CellPanicked {
+                step,
+                cell: [c.x, c.y, c.z],
+                message: panic_message(&*p),
+            })?;
             if let (Some(costs), Some(t0)) = (&mut self.costs, t0) {
                 costs.push(CellCost {
                     step: self.step,
@@ -102,15 +158,69 @@ impl<M: CellModel> ReferenceRun<M> {
                     seconds: t0.elapsed().as_secs_f64(),
                 });
             }
+            if self.check {
+                contract::check_cell_outputs::<M>(&self.grid, c, self.step, &next[start..])?;
+                firsts.push(CellResult {
+                    cell: i,
+                    out: next[start..].to_vec(),
+                    events: events[first_event..].to_vec(),
+                });
+            }
+        }
+        if self.check {
+            let (model, grid, state, step) = (&self.model, &self.grid, &self.state, self.step);
+            catch_unwind(AssertUnwindSafe(|| {
+                contract::check_pure::<M>(model, grid, state, step, &firsts)
+            }))
+            .map_err(|p| ExecError::CellPanicked {
+                step,
+                cell: [0, 0, 0],
+                message: format!(
+                    "the model panicked when a cell was computed a second time (hidden state?): {}",
+                    panic_message(&*p)
+                ),
+            })??;
+        }
+        let step = self.step + 1;
+        if let Some(inputs) = self.inputs.remove(&step) {
+            next = apply_inputs::<M>(next, &inputs);
         }
         self.state = CellStates::binned::<M>(&self.grid, next, self.step, &mut events);
+        if self.check {
+            contract::check_unique_ids::<M>(&self.grid, &self.state, step)?;
+        }
         events.sort();
-        self.step += 1;
-        Frame {
+        self.step = step;
+        Ok(Frame {
             step: self.step,
             hash: self.state.hash::<M>(),
             bodies: self.state.len(),
             events,
+        })
+    }
+}
+
+/// The states after the inputs of one step: every removed (or replaced) id goes first,
+/// then the added states are appended in input order (SPEC.md §K12).
+pub(crate) fn apply_inputs<M: CellModel>(
+    mut states: Vec<M::State>,
+    inputs: &[Input<M::State>],
+) -> Vec<M::State> {
+    let removed: BTreeSet<BodyId> = inputs
+        .iter()
+        .filter_map(|i| match i {
+            Input::Remove(id) => Some(*id),
+            Input::Replace(s) => Some(M::id(s)),
+            Input::Spawn(_) => None,
+        })
+        .collect();
+    if !removed.is_empty() {
+        states.retain(|s| !removed.contains(&M::id(s)));
+    }
+    for i in inputs {
+        if let Input::Spawn(s) | Input::Replace(s) = i {
+            states.push(s.clone());
         }
     }
+    states
 }

@@ -23,6 +23,9 @@
 //! This is the only module that starts threads, and it does so through [`Facade`].
 
 use super::clock::thread_cpu_seconds;
+use super::control::RunControl;
+pub use super::error::ExecError;
+use super::error::InputError;
 use super::schedule::Schedule;
 use super::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex, StdFacade};
 use crate::frame::{Event, Frame, StatesWanted};
@@ -30,7 +33,7 @@ use crate::grid::Grid;
 use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
 use crate::kernel::config::LoadSource;
 use crate::kernel::counters::Counters;
-use crate::kernel::message::Message;
+use crate::kernel::message::{Input, Message, MessageKind, Sign};
 use crate::kernel::partition::WorldId;
 use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::{ActionKind, World};
@@ -42,31 +45,6 @@ use std::collections::{BTreeMap, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 use std::time::Instant;
-use thiserror::Error;
-
-/// Why a threaded run stopped early. All are fatal for the run.
-#[derive(Debug, Error, Clone, PartialEq, Eq)]
-pub enum ExecError {
-    /// A world's step panicked; the other threads were stopped.
-    #[error("world {world} panicked while computing from step {step}: {message}")]
-    WorldPanicked {
-        /// The world.
-        world: WorldId,
-        /// Its local virtual time when it panicked.
-        step: Step,
-        /// The panic message.
-        message: String,
-    },
-    /// No world could act, no message was pending and GVT could not advance (a kernel bug).
-    #[error("kernel stalled at GVT {gvt}: no world can act and no message is pending")]
-    Stalled {
-        /// GVT at the stall.
-        gvt: Step,
-    },
-    /// A worker thread died outside a world's step.
-    #[error("worker thread failed: {0}")]
-    Thread(String),
-}
 
 /// Time spent by the worker threads, summed over threads (wall-clock, for statistics only:
 /// nothing here reaches a hash).
@@ -92,9 +70,9 @@ pub struct ThreadTimes {
 
 /// The result of a threaded run.
 #[derive(Clone, Debug)]
-pub struct ThreadedReport {
+pub struct ThreadedReport<E> {
     /// Committed frames in step order.
-    pub frames: Vec<Frame>,
+    pub frames: Vec<Frame<E>>,
     /// Kernel counters per world and in total.
     pub counters: Counters,
     /// Thread time statistics.
@@ -104,7 +82,7 @@ pub struct ThreadedReport {
     /// Threads used.
     pub threads: usize,
     /// `LeftDomain` events of initial states outside the grid.
-    pub initial_events: Vec<Event>,
+    pub initial_events: Vec<Event<E>>,
     /// The run trace, if `KernelConfig::trace` was on (times: seconds since the start).
     pub trace: Option<RunTrace>,
     /// The load balancing rounds (empty when balancing is off).
@@ -149,9 +127,16 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     /// How many steps a world may compute ahead of its slowest neighbour world before it
     /// lets laggards run first (optimistic modes; `KernelConfig::lead`).
     lead: Step,
-    assembly: F::Mutex<Assembly<M::State>>,
-    out: F::Mutex<Output<M::State>>,
+    assembly: F::Mutex<Assembly<M>>,
+    out: F::Mutex<Output<M>>,
     error: F::Mutex<Option<ExecError>>,
+    /// The inputs posted so far: their number (the next input's sequence number) and one
+    /// copy of each (re-posted to the worlds after a balancing round that moved cells).
+    inputs: F::Mutex<InputLog<M::State>>,
+    /// The grid (to check inputs).
+    grid: Arc<Grid>,
+    /// 1 once the sink stopped the run.
+    stop: F::Atomic,
     /// Whether worlds record a trace (`KernelConfig::trace`), and the run's start.
     trace: bool,
     started: Instant,
@@ -167,30 +152,39 @@ struct Slot<M: CellModel> {
     lead: (f64, u64),
 }
 
+/// The inputs posted so far.
+struct InputLog<S> {
+    /// Their number (the last input's sequence number).
+    count: u32,
+    /// One copy of each, in posting order (re-posted after a balancing round that moved
+    /// cells).
+    posted: Vec<Message<S>>,
+}
+
 /// Committed steps being assembled from the worlds' contributions.
-struct Assembly<S> {
-    partial: BTreeMap<Step, Partial<S>>,
+struct Assembly<M: CellModel> {
+    partial: BTreeMap<Step, Partial<M>>,
     next: Step,
 }
 
-struct Partial<S> {
+struct Partial<M: CellModel> {
     worlds: usize,
     /// The contributing worlds' cells' states (any order), shared with their logs.
-    states: Vec<Arc<[S]>>,
-    events: Vec<Event>,
+    states: Vec<Arc<[M::State]>>,
+    events: Vec<Event<M::Event>>,
 }
 
 /// Committed steps waiting for the output stage (the calling thread), whole (every world
 /// contributed) but not yet sorted and hashed: the output stage finishes the frames, off the
 /// workers' critical path.
-struct Output<S> {
-    pending: VecDeque<(Step, Partial<S>)>,
+struct Output<M: CellModel> {
+    pending: VecDeque<(Step, Partial<M>)>,
     gvt_advances: u64,
     times: ThreadTimes,
     gvt_samples: Vec<GvtSample>,
 }
 
-impl<S> Default for Output<S> {
+impl<M: CellModel> Default for Output<M> {
     fn default() -> Self {
         Output {
             pending: VecDeque::new(),
@@ -242,6 +236,40 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             self.lower(&self.inbox_min[d], affects);
         }
         self.schedule(d);
+    }
+
+    /// Schedules an input at `step` (SPEC.md §K12): checked against the earliest step
+    /// still open and broadcast to every world's inbox. It holds the GVT round's flag
+    /// meanwhile, so GVT cannot pass `step` between the check and the inboxes' lowered
+    /// bounds (a GVT round reads those bounds only while holding the flag).
+    fn post_input(&self, step: Step, input: Input<M::State>) -> Result<(), InputError> {
+        let mut spins = 0u32;
+        while self.gvt_round.swap(1) == 1 {
+            F::pause(spins);
+            spins = spins.saturating_add(1);
+        }
+        let floor = if self.optimistic {
+            self.gvt.load()
+        } else {
+            let worlds: Vec<_> = self.worlds.iter().map(|m| m.lock()).collect();
+            1 + worlds.iter().map(|s| s.world.frontier()).max().unwrap_or(0)
+        };
+        let checked = super::check_input::<M>(&self.grid, floor, step, &input);
+        if checked.is_ok() {
+            let mut log = self.inputs.lock();
+            log.count += 1;
+            let msg = input_message::<M>(&self.grid, step, input, log.count);
+            log.posted.push(msg.clone());
+            drop(log);
+            for w in 0..self.worlds.len() {
+                self.send(Message {
+                    dst_world: w as WorldId,
+                    ..msg.clone()
+                });
+            }
+        }
+        self.gvt_round.store(0);
+        checked
     }
 
     fn lower(&self, a: &F::Atomic, v: u64) {
@@ -392,7 +420,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             });
             part.worlds += 1;
             part.states.extend(slot.world.shared_states_at(t));
-            part.events.extend(slot.world.events_at(t - 1).copied());
+            part.events.extend(slot.world.events_at(t - 1).cloned());
         }
         slot.contributed = last;
         slot.world.sample_log_bytes();
@@ -576,13 +604,49 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     }
 }
 
+/// The input message of number `seq` at `step` (destination world 0; copies go to every
+/// world).
+pub(crate) fn input_message<M: CellModel>(
+    grid: &Grid,
+    step: Step,
+    input: Input<M::State>,
+    seq: u32,
+) -> Message<M::State> {
+    let (removes, adds) = match input {
+        Input::Spawn(s) => (Vec::new(), vec![s]),
+        Input::Remove(id) => (vec![id], Vec::new()),
+        Input::Replace(s) => (vec![M::id(&s)], vec![s]),
+    };
+    let bodies: Vec<(u32, M::State)> = adds
+        .into_iter()
+        .map(|s| {
+            let c = grid
+                .cell_of(M::position(&s))
+                .expect("checked inside the grid");
+            (grid.index(c) as u32, s)
+        })
+        .collect();
+    Message {
+        step,
+        kind: MessageKind::Input,
+        sign: Sign::Positive,
+        src_world: WorldId::MAX,
+        dst_world: 0,
+        src_cell: u32::MAX,
+        seq,
+        bodies: bodies.into(),
+        removes,
+        follows: false,
+    }
+}
+
 /// Finishes committed step `t` from every world's contribution ([`super::whole_frame`]) and,
 /// if `wanted` asks for them, clones its sorted states.
 fn finish_frame<M: CellModel>(
     t: Step,
-    p: Partial<M::State>,
+    p: Partial<M>,
     wanted: &StatesWanted,
-) -> (Frame, Option<Vec<M::State>>) {
+) -> (Frame<M::Event>, Option<Vec<M::State>>) {
     let (frame, sorted) =
         super::whole_frame::<M>(t, p.states.iter().flat_map(|c| c.iter()), p.events);
     let states = wanted
@@ -599,7 +663,7 @@ pub fn run_threaded<M: CellModel + 'static>(
     config: &KernelConfig,
     threads: usize,
     steps: u64,
-) -> Result<ThreadedReport, ExecError> {
+) -> Result<ThreadedReport<M::Event>, ExecError> {
     run_threaded_with::<M, StdFacade>(
         model,
         grid,
@@ -629,8 +693,53 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     threads: usize,
     steps: u64,
     wanted: StatesWanted,
-    mut sink: impl FnMut(&Frame, Option<&[&M::State]>),
-) -> Result<ThreadedReport, ExecError> {
+    mut sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>),
+) -> Result<ThreadedReport<M::Event>, ExecError> {
+    run_threaded_controlled::<M, F>(
+        ThreadedSetup {
+            model,
+            grid,
+            initial,
+            inputs: Vec::new(),
+        },
+        config,
+        threads,
+        steps,
+        wanted,
+        |f, s, _| sink(f, s),
+    )
+}
+
+/// What a threaded run starts from: the model, the grid, the initial states and the inputs
+/// scripted before the run (step, input), applied in this order at each step.
+pub struct ThreadedSetup<M: CellModel> {
+    /// The model.
+    pub model: M,
+    /// The grid.
+    pub grid: Grid,
+    /// The states at step 0.
+    pub initial: Vec<M::State>,
+    /// Inputs scheduled before the run starts.
+    pub inputs: Vec<(Step, Input<M::State>)>,
+}
+
+/// [`run_threaded_with`] with scripted inputs, and a sink that also gets a [`RunControl`]
+/// to schedule inputs during the run (checked against GVT at that moment) or stop it after
+/// the current frame. Stopping ends the run early: the report holds the frames delivered.
+pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
+    setup: ThreadedSetup<M>,
+    config: &KernelConfig,
+    threads: usize,
+    steps: u64,
+    wanted: StatesWanted,
+    mut sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+) -> Result<ThreadedReport<M::Event>, ExecError> {
+    let ThreadedSetup {
+        model,
+        grid,
+        initial,
+        inputs: scripted,
+    } = setup;
     let start = Instant::now();
     let threads = threads.max(1);
     let super::Worlds {
@@ -699,17 +808,35 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
         }),
         out: F::Mutex::new(Output::default()),
         error: F::Mutex::new(None),
+        inputs: F::Mutex::new(InputLog {
+            count: 0,
+            posted: Vec::new(),
+        }),
+        grid: grid.clone(),
+        stop: F::Atomic::new(0),
         trace: config.trace,
         started: start,
     });
     // The output stage: hand committed frames to the sink while the workers run.
+    for (step, input) in scripted {
+        shared.post_input(step, input)?;
+    }
     let mut frames = Vec::new();
-    let mut deliver = |batch: VecDeque<(Step, Partial<M::State>)>| {
+    let mut stopped = false;
+    let poster = shared.clone();
+    let mut deliver = |batch: VecDeque<(Step, Partial<M>)>| {
         for (t, partial) in batch {
             let (frame, states) = finish_frame::<M>(t, partial, &wanted);
-            if frames.len() < steps as usize {
+            if frames.len() < steps as usize && !stopped {
                 let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
-                sink(&frame, refs.as_deref());
+                let mut post = |step: Step, input: Input<M::State>| poster.post_input(step, input);
+                let mut control = RunControl::new(poster.gvt.load(), &mut post);
+                sink(&frame, refs.as_deref(), &mut control);
+                if control.stopped() {
+                    stopped = true;
+                    poster.stop.store(1);
+                    poster.status.store(DONE);
+                }
                 frames.push(frame);
             }
         }
@@ -720,7 +847,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
     loop {
         run_epoch(&shared, threads, &mut deliver)?;
         let committed = shared.committed.load();
-        if committed >= steps || steps == 0 {
+        if committed >= steps || steps == 0 || shared.stop.load() == 1 {
             break;
         }
         // A balancing round at the epoch's last step: every world has contributed it, so
@@ -765,13 +892,27 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
                 inbox.lock().clear();
                 shared.inbox_min[w].store(u64::MAX);
             }
-            for s in locked.iter_mut() {
-                for m in s.world.start() {
-                    let d = m.dst_world as usize;
-                    let affects = m.affects();
-                    shared.inboxes[d].lock().push(m);
-                    shared.lower(&shared.inbox_min[d], affects);
-                }
+            let pending: Vec<Message<M::State>> = shared
+                .inputs
+                .lock()
+                .posted
+                .iter()
+                .filter(|m| m.step > committed)
+                .cloned()
+                .collect();
+            let reposted = pending.iter().flat_map(|m| {
+                (0..n).map(move |w| Message {
+                    dst_world: w as WorldId,
+                    ..m.clone()
+                })
+            });
+            let started: Vec<Message<M::State>> =
+                locked.iter_mut().flat_map(|s| s.world.start()).collect();
+            for m in started.into_iter().chain(reposted) {
+                let d = m.dst_world as usize;
+                let affects = m.affects();
+                shared.inboxes[d].lock().push(m);
+                shared.lower(&shared.inbox_min[d], affects);
             }
         }
         for (w, s) in locked.iter_mut().enumerate() {
@@ -813,7 +954,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
 fn run_epoch<M: CellModel + 'static, F: Facade>(
     shared: &Arc<Shared<M, F>>,
     threads: usize,
-    deliver: &mut impl FnMut(VecDeque<(Step, Partial<M::State>)>),
+    deliver: &mut impl FnMut(VecDeque<(Step, Partial<M>)>),
 ) -> Result<(), ExecError> {
     // Tasks left from an earlier epoch are stale: every world is queued once again.
     shared.sched.lock().reset();

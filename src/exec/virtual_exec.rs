@@ -37,6 +37,9 @@
 //! assert_eq!(again.run(20), frames);
 //! ```
 
+use super::control::RunControl;
+use super::error::{ExecError, InputError};
+use super::sync::panic_message;
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
@@ -52,6 +55,7 @@ use crate::model::{CellModel, Step};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::{BTreeMap, VecDeque};
+use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 
 /// Prefix of schedule strings.
@@ -179,6 +183,10 @@ pub struct VirtualRun<M: CellModel> {
     leads: Vec<(f64, u64)>,
     /// One copy of every input posted (re-posted to the worlds after a balancing round).
     inputs_posted: Vec<Message<M::State>>,
+    /// A world's action that panicked (the run cannot go on).
+    failure: Option<ExecError>,
+    /// Whether a controlled run's sink stopped the run.
+    stopped: bool,
 }
 
 impl<M: CellModel> VirtualRun<M> {
@@ -192,7 +200,7 @@ impl<M: CellModel> VirtualRun<M> {
         grid: Grid,
         initial: Vec<M::State>,
         config: &KernelConfig,
-    ) -> (Self, Vec<Event>) {
+    ) -> (Self, Vec<Event<M::Event>>) {
         assert!(config.worlds >= 1, "at least one world");
         let super::Worlds {
             grid,
@@ -237,6 +245,8 @@ impl<M: CellModel> VirtualRun<M> {
             computed_at_round,
             leads: vec![(0.0, 0); worlds.len()],
             inputs_posted: Vec::new(),
+            failure: None,
+            stopped: false,
         };
         run.next_round = run.balancer.next_round_after(0);
         for w in &mut worlds {
@@ -254,7 +264,7 @@ impl<M: CellModel> VirtualRun<M> {
         initial: Vec<M::State>,
         config: &KernelConfig,
         bytes: &[u8],
-    ) -> (Self, Vec<Event>) {
+    ) -> (Self, Vec<Event<M::Event>>) {
         let mut c = config.clone();
         c.schedule = ScheduleSpec::Bytes(bytes.to_vec());
         Self::new(model, grid, initial, &c)
@@ -267,25 +277,40 @@ impl<M: CellModel> VirtualRun<M> {
         }
     }
 
-    /// Schedules an external input at step `step`: it is broadcast to every world as an input
-    /// message (in the optimistic modes through the in-flight pool, so it may arrive late and
-    /// cause rollbacks; in conservative mode straight into the inboxes).
-    ///
-    /// # Panics
-    /// If `step` is 0 or below GVT (optimistic modes) or not beyond every state already made
-    /// known (conservative mode: [`World::frontier`]), or if an added entity lies outside the
-    /// grid.
-    pub fn add_input(&mut self, step: Step, input: Input<M::State>) {
-        let conservative = self.config.mode == RollbackMode::Conservative;
-        let floor = if conservative {
+    /// The earliest step an input may name now: GVT in the optimistic modes; in
+    /// conservative mode the step after every state already made known to another world
+    /// ([`World::frontier`]).
+    pub fn input_floor(&self) -> Step {
+        if self.config.mode == RollbackMode::Conservative {
             1 + self.worlds.iter().map(|w| w.frontier()).max().unwrap_or(0)
         } else {
             self.gvt
-        };
-        assert!(
-            step >= 1 && step >= floor,
-            "input at step {step} is too late (must be at least {floor})"
-        );
+        }
+    }
+
+    /// Schedules an external input at step `step` ([`try_add_input`](Self::try_add_input)).
+    ///
+    /// # Panics
+    /// If the input is refused.
+    pub fn add_input(&mut self, step: Step, input: Input<M::State>) {
+        if let Err(e) = self.try_add_input(step, input) {
+            panic!("{e}");
+        }
+    }
+
+    /// Schedules an external input at step `step`: it is broadcast to every world as an input
+    /// message (in the optimistic modes through the in-flight pool, so it may arrive late and
+    /// cause rollbacks; in conservative mode straight into the inboxes). Refused if `step` is
+    /// 0 or below [`input_floor`](Self::input_floor), or if an added entity lies outside the
+    /// grid.
+    pub fn try_add_input(&mut self, step: Step, input: Input<M::State>) -> Result<(), InputError> {
+        super::check_input::<M>(&self.grid, self.input_floor(), step, &input)?;
+        self.post_input(step, input);
+        Ok(())
+    }
+
+    /// Posts a checked input.
+    fn post_input(&mut self, step: Step, input: Input<M::State>) {
         let (removes, adds) = match input {
             Input::Spawn(s) => (Vec::new(), vec![s]),
             Input::Remove(id) => (vec![id], Vec::new()),
@@ -294,10 +319,7 @@ impl<M: CellModel> VirtualRun<M> {
         let bodies: Bodies<M::State> = adds
             .into_iter()
             .map(|s| {
-                let c = self
-                    .grid
-                    .cell_of(M::position(&s))
-                    .unwrap_or_else(|| panic!("input entity {} outside the grid", M::id(&s)));
+                let c = self.grid.cell_of(M::position(&s)).expect("checked inside");
                 (self.grid.index(c) as u32, s)
             })
             .collect::<Vec<_>>()
@@ -485,7 +507,7 @@ impl<M: CellModel> VirtualRun<M> {
     }
 
     /// Runs until exactly `steps` more steps are committed, returning their frames in step order.
-    pub fn run(&mut self, steps: u64) -> Vec<Frame> {
+    pub fn run(&mut self, steps: u64) -> Vec<Frame<M::Event>> {
         let mut frames = Vec::new();
         self.run_with(steps, |f| frames.push(f));
         frames
@@ -493,18 +515,37 @@ impl<M: CellModel> VirtualRun<M> {
 
     /// Runs until exactly `steps` more steps are committed, handing each committed frame to `sink`
     /// in step order.
-    pub fn run_with(&mut self, steps: u64, mut sink: impl FnMut(Frame)) {
+    pub fn run_with(&mut self, steps: u64, mut sink: impl FnMut(Frame<M::Event>)) {
         self.run_with_states(steps, &StatesWanted::none(), |f, _| sink(f));
     }
 
     /// [`run_with`](Self::run_with), also handing the sink the committed states (sorted by
     /// id) of the steps `wanted` asks for.
+    ///
+    /// # Panics
+    /// If a world's action panics (with its message; see
+    /// [`run_controlled`](Self::run_controlled) for the error instead).
     pub fn run_with_states(
         &mut self,
         steps: u64,
         wanted: &StatesWanted,
-        mut sink: impl FnMut(Frame, Option<&[&M::State]>),
+        mut sink: impl FnMut(Frame<M::Event>, Option<&[&M::State]>),
     ) {
+        if let Err(e) = self.run_controlled(steps, wanted, |f, s, _| sink(f, s)) {
+            panic!("{e}");
+        }
+    }
+
+    /// Runs until `steps` more steps are committed (or the sink stops the run), handing each
+    /// committed frame in step order to `sink` with the committed states (sorted by id) of
+    /// the steps `wanted` asks for and a [`RunControl`] to schedule inputs or stop. A panic
+    /// of a world's action is an [`ExecError::WorldPanicked`] naming the world and step.
+    pub fn run_controlled(
+        &mut self,
+        steps: u64,
+        wanted: &StatesWanted,
+        mut sink: impl FnMut(Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+    ) -> Result<(), ExecError> {
         let target = self.committed + steps;
         self.limit = target;
         self.end = self.end.max(target);
@@ -513,11 +554,20 @@ impl<M: CellModel> VirtualRun<M> {
             w.set_end(end);
         }
         self.update_gvt(wanted, &mut sink);
-        while self.committed < target {
+        while self.committed < target && !self.stopped {
             self.balance_if_due();
             self.decide();
+            if let Some(e) = self.failure.take() {
+                return Err(e);
+            }
             self.update_gvt(wanted, &mut sink);
         }
+        Ok(())
+    }
+
+    /// Whether a controlled run's sink stopped the run.
+    pub fn stopped(&self) -> bool {
+        self.stopped
     }
 
     fn decide(&mut self) {
@@ -546,7 +596,21 @@ impl<M: CellModel> VirtualRun<M> {
                 let now = self.started.elapsed().as_secs_f64();
                 self.worlds[acts[i]].trace_time(now);
             }
-            let msgs = self.changing(acts[i]).act(gvt);
+            let w = acts[i];
+            let lvt = self.worlds[w].lvt();
+            let acted = catch_unwind(AssertUnwindSafe(|| self.changing(w).act(gvt)));
+            let msgs = match acted {
+                Ok(msgs) => msgs,
+                Err(p) => {
+                    self.failure = Some(ExecError::WorldPanicked {
+                        world: w as WorldId,
+                        step: lvt,
+                        message: panic_message(&*p),
+                    });
+                    self.acts = acts;
+                    return;
+                }
+            };
             let lead = &mut self.leads[acts[i]];
             lead.0 += self.worlds[acts[i]].lvt().saturating_sub(gvt) as f64;
             lead.1 += 1;
@@ -562,7 +626,16 @@ impl<M: CellModel> VirtualRun<M> {
             if *n == 0 {
                 self.in_flight.remove(&a);
             }
-            self.changing(m.dst_world as usize).receive(m);
+            let w = m.dst_world as usize;
+            let lvt = self.worlds[w].lvt();
+            let received = catch_unwind(AssertUnwindSafe(|| self.changing(w).receive(m)));
+            if let Err(p) = received {
+                self.failure = Some(ExecError::WorldPanicked {
+                    world: w as WorldId,
+                    step: lvt,
+                    message: panic_message(&*p),
+                });
+            }
         }
         self.acts = acts;
     }
@@ -576,7 +649,7 @@ impl<M: CellModel> VirtualRun<M> {
     fn update_gvt(
         &mut self,
         wanted: &StatesWanted,
-        sink: &mut impl FnMut(Frame, Option<&[&M::State]>),
+        sink: &mut impl FnMut(Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
     ) {
         for (b, w) in self.bounds.iter_mut().zip(&self.worlds) {
             if b.is_none() {
@@ -607,18 +680,30 @@ impl<M: CellModel> VirtualRun<M> {
         } else if self.committed + 1 >= self.gvt || self.committed >= self.limit {
             return;
         }
-        while self.committed + 1 < new && self.committed < self.limit {
+        let floor = self.input_floor();
+        let grid = self.grid.clone();
+        while self.committed + 1 < new && self.committed < self.limit && !self.stopped {
             let t = self.committed + 1;
             let (frame, all) = self.frame(t);
-            if wanted.wants(t, frame.hash) {
-                sink(frame, Some(&all));
-            } else {
-                sink(frame, None);
-            }
+            let mut pending = Vec::new();
+            let mut post = |step: Step, input: Input<M::State>| {
+                super::check_input::<M>(&grid, floor, step, &input)?;
+                pending.push((step, input));
+                Ok(())
+            };
+            let mut control = RunControl::new(floor, &mut post);
+            let states = wanted.wants(t, frame.hash).then_some(&all[..]);
+            sink(frame, states, &mut control);
+            let stop = control.stopped();
+            drop(all);
             for w in &mut self.worlds {
                 w.note_committed(t);
             }
             self.committed = t;
+            for (step, input) in pending {
+                self.post_input(step, input);
+            }
+            self.stopped |= stop;
         }
         for w in &mut self.worlds {
             w.sample_log_bytes();
@@ -626,12 +711,12 @@ impl<M: CellModel> VirtualRun<M> {
         }
     }
 
-    fn frame(&self, t: Step) -> (Frame, Vec<&M::State>) {
-        let events: Vec<Event> = self
+    fn frame(&self, t: Step) -> (Frame<M::Event>, Vec<&M::State>) {
+        let events: Vec<Event<M::Event>> = self
             .worlds
             .iter()
             .flat_map(|w| w.events_at(t - 1))
-            .copied()
+            .cloned()
             .collect();
         super::whole_frame::<M>(t, self.worlds.iter().flat_map(|w| w.state_at(t)), events)
     }
@@ -639,15 +724,15 @@ impl<M: CellModel> VirtualRun<M> {
 
 /// What [`run_virtual`] returns.
 #[derive(Clone, Debug)]
-pub struct VirtualReport {
+pub struct VirtualReport<E> {
     /// Committed frames, steps 1..=N.
-    pub frames: Vec<Frame>,
+    pub frames: Vec<Frame<E>>,
     /// Counters.
     pub counters: Counters,
     /// The replay string (empty decisions unless `record_schedule`).
     pub schedule: String,
     /// `LeftDomain` events of initial states outside the grid.
-    pub initial_events: Vec<Event>,
+    pub initial_events: Vec<Event<E>>,
 }
 
 /// Runs `model` from `initial` for `steps` steps on the virtual executor.
@@ -657,7 +742,7 @@ pub fn run_virtual<M: CellModel>(
     initial: Vec<M::State>,
     config: &KernelConfig,
     steps: u64,
-) -> VirtualReport {
+) -> VirtualReport<M::Event> {
     let (mut run, initial_events) = VirtualRun::new(model, grid, initial, config);
     let frames = run.run(steps);
     VirtualReport {

@@ -3,7 +3,7 @@
 //! targets affordable. It honours the locality contract with cell edge 1: particles
 //! interact within distance 0.5 and move at most 0.3 per step.
 
-use crate::frame::{Event, EventKind};
+use crate::frame::{Event, LeftGrid};
 use crate::grid::Grid;
 use crate::hash::StateHash;
 use crate::math::Vec3;
@@ -59,8 +59,24 @@ impl Particles {
     }
 }
 
+/// The synthetic model's events.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum ParticleEvent {
+    /// The particle's speed was capped at [`Particles::MAX_SPEED`].
+    SpeedCapped,
+    /// The particle left the grid (an open face) and was removed.
+    LeftGrid,
+}
+
+impl From<LeftGrid> for ParticleEvent {
+    fn from(_: LeftGrid) -> Self {
+        ParticleEvent::LeftGrid
+    }
+}
+
 impl CellModel for Particles {
     type State = Particle;
+    type Event = ParticleEvent;
 
     fn id(s: &Particle) -> BodyId {
         s.id
@@ -76,7 +92,7 @@ impl CellModel for Particles {
         _grid: &Grid,
         nb: &Neighbourhood<'_, Particle>,
         out: &mut Vec<Particle>,
-        events: &mut Vec<Event>,
+        events: &mut Vec<Event<ParticleEvent>>,
     ) {
         let mut others: Vec<&Particle> = nb.iter().collect();
         others.sort_by_key(|p| p.id);
@@ -102,7 +118,7 @@ impl CellModel for Particles {
                 events.push(Event {
                     step,
                     body: p.id,
-                    kind: EventKind::SpeedCapped,
+                    kind: ParticleEvent::SpeedCapped,
                 });
             }
             let mut pos = [0, 1, 2].map(|a| p.pos[a] + v[a]);

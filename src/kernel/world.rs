@@ -24,7 +24,7 @@ use super::counters::WorldCounters;
 use super::message::{Bodies, Message, MessageKey, MessageKind, Sign};
 use super::partition::{Partition, WorldId};
 use super::trace::WorldTrace;
-use crate::frame::{Event, EventKind};
+use crate::frame::{Event, LeftGrid};
 use crate::grid::Grid;
 use crate::model::{BodyId, CellModel, Neighbourhood, Step};
 use crate::state::CellStates;
@@ -49,18 +49,18 @@ fn share<S>(v: Vec<S>) -> Shared<S> {
 /// The output of one cell computation: the bodies it homes at the next step, sorted by
 /// (home cell, id), their home cells, and the events it raised.
 #[derive(Clone, Debug)]
-struct Out<S> {
+struct Out<S, E> {
     /// The cell computed.
     cell: u32,
     bodies: Shared<S>,
     /// The home cell of each of `bodies`; empty exactly when every body stays in `cell`.
     homes: Vec<u32>,
-    events: Vec<Event>,
+    events: Vec<Event<E>>,
     /// Whether a cell computation produced it (an empty cell's output is not computed).
     computed: bool,
 }
 
-impl<S> Out<S> {
+impl<S, E> Out<S, E> {
     fn empty(cell: u32) -> Self {
         Out {
             cell,
@@ -139,9 +139,9 @@ struct Sent<S> {
 
 /// Everything a world holds about one step.
 #[derive(Debug)]
-struct Slot<S> {
+struct Slot<S, E> {
     states: Vec<Shared<S>>,
-    outs: Vec<Option<Out<S>>>,
+    outs: Vec<Option<Out<S, E>>>,
     known: Vec<bool>,
     /// The view of each margin cell (indexed like `World::margin`) at this step (K4: the
     /// effective ghost of the step, else — optimistic modes — the view of the step before;
@@ -158,7 +158,7 @@ struct Slot<S> {
 /// An input applied to a slot: the ids it removes and the (home cell, state) it adds.
 type InputEntry<S> = (Vec<BodyId>, Bodies<S>);
 
-impl<S: Clone> Slot<S> {
+impl<S: Clone, E: Clone> Slot<S, E> {
     /// The state of own cell `x` (index in `World::cells`).
     fn state(&self, x: usize) -> &[S] {
         view(&self.states[x])
@@ -182,19 +182,19 @@ impl<S: Clone> Slot<S> {
 
     /// Bytes this slot holds. A ghost view shared with the slot before (`prev`, the same
     /// `Arc`) is counted there only; inputs count their states and removed ids.
-    fn bytes(&self, prev: Option<&Slot<S>>) -> usize {
+    fn bytes(&self, prev: Option<&Slot<S, E>>) -> usize {
         let s = std::mem::size_of::<S>();
         let p = std::mem::size_of::<(u32, S)>();
         let v = std::mem::size_of::<Vec<S>>();
         let h = std::mem::size_of::<Shared<S>>();
-        let mut b = self.states.len() * (h + std::mem::size_of::<Option<Out<S>>>() + 1);
+        let mut b = self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1);
         // A cell's states shared by its output and the next step's state count half at each.
         let held = |a: &Arc<[S]>| (16 + a.len() * s) / Arc::strong_count(a);
         b += self.states.iter().flatten().map(held).sum::<usize>();
         for o in self.outs.iter().flatten() {
             b += o.bodies.as_ref().map_or(0, held)
                 + o.homes.len() * 4
-                + o.events.len() * std::mem::size_of::<Event>();
+                + o.events.len() * std::mem::size_of::<Event<E>>();
         }
         b += self.ghosts.len() * std::mem::size_of::<Option<Arc<Vec<S>>>>();
         for (k, g) in self.ghosts.iter().enumerate() {
@@ -266,7 +266,7 @@ pub struct World<M: CellModel> {
     next: Vec<Step>,
     next_min: Step,
     idle_at: Option<Step>,
-    slots: VecDeque<Slot<M::State>>,
+    slots: VecDeque<Slot<M::State, M::Event>>,
     dirty: BTreeMap<Step, BTreeSet<u32>>,
     inbox: BTreeMap<MessageKey, Message<M::State>>,
     counters: WorldCounters,
@@ -711,13 +711,13 @@ impl<M: CellModel> World<M> {
             .map(|s| s.state(self.part.local(cell) as usize))
     }
 
-    fn slot(&self, t: Step) -> Option<&Slot<M::State>> {
+    fn slot(&self, t: Step) -> Option<&Slot<M::State, M::Event>> {
         t.checked_sub(self.base)
             .and_then(|i| self.slots.get(i as usize))
     }
 
     /// The events of its cells' computations at step `s` (any order).
-    pub fn events_at(&self, s: Step) -> impl Iterator<Item = &Event> + '_ {
+    pub fn events_at(&self, s: Step) -> impl Iterator<Item = &Event<M::Event>> + '_ {
         self.slot(s)
             .into_iter()
             .flat_map(|s| s.outs.iter().flatten().flat_map(|o| o.events.iter()))
@@ -814,7 +814,7 @@ impl<M: CellModel> World<M> {
     }
 
     /// Computes own cell `x` at step `s` from the states and ghosts held for `s`.
-    fn compute(&mut self, x: usize, s: Step) -> Out<M::State> {
+    fn compute(&mut self, x: usize, s: Step) -> Out<M::State, M::Event> {
         let cell = self.cells[x];
         let grid = &*self.grid;
         let slot = &self.slots[(s - self.base) as usize];
@@ -855,7 +855,7 @@ impl<M: CellModel> World<M> {
                     events.push(Event {
                         step: s,
                         body: M::id(b),
-                        kind: EventKind::LeftDomain,
+                        kind: LeftGrid.into(),
                     });
                 }
             }
@@ -894,7 +894,7 @@ impl<M: CellModel> World<M> {
 
     /// Whether two outputs are the same (early cut-off and lazy cancellation compare
     /// entities with [`World::same_entity`]).
-    fn same_out(&self, a: &Out<M::State>, b: &Out<M::State>) -> bool {
+    fn same_out(&self, a: &Out<M::State, M::Event>, b: &Out<M::State, M::Event>) -> bool {
         let (x, y) = (view(&a.bodies), view(&b.bodies));
         a.events == b.events
             && a.homes == b.homes

@@ -4,6 +4,7 @@
 mod body;
 mod contact;
 mod environment;
+mod event;
 pub mod metrics;
 mod model;
 mod params;
@@ -12,5 +13,6 @@ mod solver;
 pub use body::{Body, Material, Shape};
 pub use contact::{ContactPoint, ContactSet};
 pub use environment::{Environment, Plane, StaticCuboid};
+pub use event::EventKind;
 pub use model::RigidBodyModel;
 pub use params::SolverParams;

@@ -6,9 +6,10 @@ use super::contact::{
     ContactSet, PairManifold,
 };
 use super::environment::Environment;
+use super::event::EventKind;
 use super::params::SolverParams;
 use super::solver::solve_body;
-use crate::frame::{Event, EventKind};
+use crate::frame::Event;
 use crate::grid::Grid;
 use crate::hash::StateHash;
 use crate::math::Vec3;
@@ -166,7 +167,7 @@ impl RigidBodyModel {
     }
 
     /// Applies the speed, displacement and spin caps, raising `SpeedCapped` if any bit.
-    fn cap(&self, before: &Body, after: &mut Body, step: Step, events: &mut Vec<Event>) {
+    fn cap(&self, before: &Body, after: &mut Body, step: Step, events: &mut Vec<Event<EventKind>>) {
         let mut capped = false;
         let max_disp = self.max_displacement();
         let d = after.position - before.position;
@@ -255,6 +256,7 @@ fn frozen(b: &Body) -> Body {
 
 impl CellModel for RigidBodyModel {
     type State = Body;
+    type Event = EventKind;
 
     fn id(state: &Body) -> BodyId {
         state.id
@@ -270,7 +272,7 @@ impl CellModel for RigidBodyModel {
         _grid: &Grid,
         nb: &Neighbourhood<'_, Body>,
         out: &mut Vec<Body>,
-        events: &mut Vec<Event>,
+        events: &mut Vec<Event<EventKind>>,
     ) {
         // Sleeping (SPEC.md §5.4): a sleeping body that no awake body can reach keeps its
         // pose and has zero velocity; if the whole neighbourhood sleeps, nothing else is done.
@@ -366,6 +368,10 @@ impl CellModel for RigidBodyModel {
             && a.friction.to_bits() == b.friction.to_bits()
             && a.restitution.to_bits() == b.restitution.to_bits()
             && a.shape == b.shape
+    }
+
+    fn event_name(kind: &EventKind) -> String {
+        kind.name().to_string()
     }
 
     fn fields(b: &Body) -> Vec<(String, String)> {

@@ -17,7 +17,7 @@ pub fn reference<M: CellModel + Clone>(
     grid: &Grid,
     init: &[M::State],
     steps: u64,
-) -> Vec<Frame> {
+) -> Vec<Frame<M::Event>> {
     let (mut r, _) = ReferenceRun::new(model.clone(), grid.clone(), init.to_vec());
     (0..steps).map(|_| r.advance()).collect()
 }
@@ -30,7 +30,7 @@ pub fn compare<M: CellModel + Clone>(
     grid: &Grid,
     init: &[M::State],
     config: &KernelConfig,
-    expected: &[Frame],
+    expected: &[Frame<M::Event>],
 ) -> Result<Counters, String> {
     let (mut run, _) = VirtualRun::new(model.clone(), grid.clone(), init.to_vec(), config);
     let frames = run.run(expected.len() as u64);

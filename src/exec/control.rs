@@ -1,0 +1,57 @@
+//! What a frame sink may do while a run goes on: schedule inputs at steps not yet committed,
+//! and stop the run after the current frame.
+
+use super::error::InputError;
+use crate::kernel::Input;
+use crate::model::Step;
+
+/// Handed to a frame sink with every committed frame: the sink may schedule inputs (they
+/// apply at their step on every executor with the same bits; in the optimistic modes they
+/// may arrive after the worlds computed past their step and roll them back) and may stop
+/// the run.
+pub struct RunControl<'a, S> {
+    earliest: Step,
+    post: &'a mut dyn FnMut(Step, Input<S>) -> Result<(), InputError>,
+    stop: bool,
+}
+
+impl<'a, S> RunControl<'a, S> {
+    /// A control whose inputs go to `post`; `earliest` is the earliest step an input may
+    /// name at this moment (see [`earliest_input_step`](Self::earliest_input_step)).
+    pub(crate) fn new(
+        earliest: Step,
+        post: &'a mut dyn FnMut(Step, Input<S>) -> Result<(), InputError>,
+    ) -> Self {
+        RunControl {
+            earliest,
+            post,
+            stop: false,
+        }
+    }
+
+    /// The earliest step an input could name when this frame was handed over: the step
+    /// after the committed one on the reference, GVT on the Time Warp executors (the
+    /// threaded executor's GVT may have moved on since; [`input`](Self::input) checks
+    /// again). An input stamped a few steps later is accepted on every executor.
+    pub fn earliest_input_step(&self) -> Step {
+        self.earliest
+    }
+
+    /// Schedules `input` at step `step`. Refused if the step is 0 or already committed
+    /// (or, in conservative mode, already made known to another world), or if an added
+    /// entity lies outside the grid.
+    pub fn input(&mut self, step: Step, input: Input<S>) -> Result<(), InputError> {
+        (self.post)(step, input)
+    }
+
+    /// Stops the run after this frame: no further frame reaches the sink, and the run's
+    /// report says where it stopped.
+    pub fn stop(&mut self) {
+        self.stop = true;
+    }
+
+    /// Whether [`stop`](Self::stop) was called.
+    pub fn stopped(&self) -> bool {
+        self.stop
+    }
+}

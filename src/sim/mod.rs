@@ -1,0 +1,16 @@
+//! Running a model: [`Runner`] runs any [`crate::CellModel`] on any executor and returns one
+//! [`ModelReport`] (or one [`crate::ExecError`]); [`verify`](crate::verify) builds on it. The
+//! rigid-body model has thin wrappers: [`run_scene`], [`Simulation`], and physics
+//! measurements of a state ([`StateReport`]).
+
+mod options;
+mod report;
+mod rigid;
+mod runner;
+
+pub use options::{ExecutorKind, RunOptions, UnknownExecutor};
+pub use report::{KernelReport, ModelReport};
+pub use rigid::{
+    measure, measure_state, run_scene, run_scene_controlled, RunReport, Simulation, StateReport,
+};
+pub use runner::{run_model, Runner};

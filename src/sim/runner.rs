@@ -1,0 +1,316 @@
+//! One generic way to run any [`CellModel`] on any executor: [`Runner`] (and the shorthand
+//! [`run_model`]) returns one [`ModelReport`] or one [`ExecError`] whichever executor runs.
+
+use super::options::{ExecutorKind, RunOptions};
+use super::report::{KernelReport, ModelReport};
+use crate::exec::control::RunControl;
+use crate::exec::error::ExecError;
+use crate::exec::reference::ReferenceRun;
+use crate::exec::sync::StdFacade;
+use crate::exec::threaded::{run_threaded_controlled, ThreadTimes, ThreadedSetup};
+use crate::exec::virtual_exec::VirtualRun;
+use crate::frame::{Event, Frame, StatesWanted};
+use crate::grid::Grid;
+use crate::hash::hex;
+use crate::kernel::{Counters, Input, RoundRecord};
+use crate::model::{CellModel, Step};
+use crate::state::CellStates;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// A run of a model, configured step by step, then [`run`](Self::run):
+///
+/// ```
+/// use soda::prelude::*;
+/// use soda::kernel::synthetic::Particles;
+///
+/// let (model, grid, initial) = Particles::scene(40, [4, 2, 2], false, 7);
+/// let reference = Runner::new(model.clone(), grid.clone(), initial.clone()).run_quiet(20)?;
+/// let threaded = Runner::new(model, grid, initial)
+///     .options(RunOptions::threaded(KernelConfig::new(4), 2))
+///     .run_quiet(20)?;
+/// assert_eq!(reference.hash, threaded.hash);
+/// # Ok::<(), soda::ExecError>(())
+/// ```
+pub struct Runner<M: CellModel> {
+    model: M,
+    grid: Grid,
+    initial: Vec<M::State>,
+    inputs: Vec<(Step, Input<M::State>)>,
+    options: RunOptions,
+    wanted: StatesWanted,
+    check_contract: bool,
+}
+
+impl<M: CellModel + 'static> Runner<M> {
+    /// A run of `model` over `grid` from the states `initial` at step 0, on the reference
+    /// executor unless [`options`](Self::options) say otherwise.
+    pub fn new(model: M, grid: Grid, initial: Vec<M::State>) -> Self {
+        Runner {
+            model,
+            grid,
+            initial,
+            inputs: Vec::new(),
+            options: RunOptions::default(),
+            wanted: StatesWanted::none(),
+            check_contract: false,
+        }
+    }
+
+    /// The executor, kernel configuration and threads.
+    pub fn options(mut self, options: RunOptions) -> Self {
+        self.options = options;
+        self
+    }
+
+    /// Schedules an input at `step` before the run starts (applied at that step, after the
+    /// inputs scheduled before it; SPEC.md §K12).
+    pub fn input(mut self, step: Step, input: Input<M::State>) -> Self {
+        self.inputs.push((step, input));
+        self
+    }
+
+    /// Schedules every `(step, input)` of `inputs` ([`input`](Self::input)).
+    pub fn inputs(mut self, inputs: impl IntoIterator<Item = (Step, Input<M::State>)>) -> Self {
+        self.inputs.extend(inputs);
+        self
+    }
+
+    /// The committed steps whose full states the sink receives (others: frames only).
+    pub fn states(mut self, wanted: StatesWanted) -> Self {
+        self.wanted = wanted;
+        self
+    }
+
+    /// Runs the contract checker ([`crate::exec::contract`]) on every step (reference
+    /// executor only; about twice the reference's cost).
+    pub fn check_contract(mut self, on: bool) -> Self {
+        self.check_contract = on;
+        self
+    }
+
+    /// Runs `steps` steps without looking at the frames.
+    pub fn run_quiet(self, steps: u64) -> Result<ModelReport, ExecError> {
+        self.run(steps, |_, _, _| {})
+    }
+
+    /// Runs `steps` steps, handing every committed frame in step order to `sink` with the
+    /// committed states (sorted by id) of the steps [`states`](Self::states) asks for, and a
+    /// [`RunControl`] to schedule inputs or stop the run.
+    pub fn run(
+        self,
+        steps: u64,
+        mut sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+    ) -> Result<ModelReport, ExecError> {
+        let Runner {
+            model,
+            grid,
+            initial,
+            inputs,
+            options,
+            wanted,
+            check_contract,
+        } = self;
+        let mut tally = Tally::<M>::new(&grid, &initial);
+        let start = Instant::now();
+        let mut on_frame =
+            |f: &Frame<M::Event>, s: Option<&[&M::State]>, c: &mut RunControl<'_, M::State>| {
+                tally.frame(f);
+                sink(f, s, c);
+                if c.stopped() {
+                    tally.stopped = true;
+                }
+            };
+        let (kernel, initial_events, trace) = match options.executor {
+            ExecutorKind::Reference => {
+                let (mut run, events) = ReferenceRun::new(model, grid, initial);
+                for (step, input) in inputs {
+                    run.add_input(step, input)?;
+                }
+                run.check_contract(check_contract)?;
+                for _ in 0..steps {
+                    let f = run.try_advance()?;
+                    let floor = run.step_number() + 1;
+                    let mut pending = Vec::new();
+                    let run_grid = run.grid().clone();
+                    let mut post = |step: Step, input: Input<M::State>| {
+                        crate::exec::check_input::<M>(&run_grid, floor, step, &input)?;
+                        pending.push((step, input));
+                        Ok(())
+                    };
+                    let mut control = RunControl::new(floor, &mut post);
+                    if wanted.wants(f.step, f.hash) {
+                        let sorted = run.state().sorted::<M>();
+                        on_frame(&f, Some(&sorted), &mut control);
+                    } else {
+                        on_frame(&f, None, &mut control);
+                    }
+                    let stop = control.stopped();
+                    for (step, input) in pending {
+                        run.add_input(step, input)?;
+                    }
+                    if stop {
+                        break;
+                    }
+                }
+                (None, events, None)
+            }
+            ExecutorKind::Virtual => {
+                let (mut run, events) = VirtualRun::new(model, grid, initial, &options.kernel);
+                for (step, input) in inputs {
+                    run.try_add_input(step, input)?;
+                }
+                run.run_controlled(steps, &wanted, |f, s, c| on_frame(&f, s, c))?;
+                let trace = options.kernel.trace.then(|| run.take_trace());
+                let kernel = kernel_report(
+                    &options,
+                    1,
+                    options
+                        .kernel
+                        .record_schedule
+                        .then(|| run.schedule_string()),
+                    run.counters(),
+                    None,
+                    run.balance_history().to_vec(),
+                );
+                (Some(kernel), events, trace)
+            }
+            ExecutorKind::Threaded => {
+                let report = run_threaded_controlled::<M, StdFacade>(
+                    ThreadedSetup {
+                        model,
+                        grid,
+                        initial,
+                        inputs,
+                    },
+                    &options.kernel,
+                    options.threads.max(1),
+                    steps,
+                    wanted,
+                    &mut on_frame,
+                )?;
+                let kernel = kernel_report(
+                    &options,
+                    report.threads,
+                    None,
+                    report.counters,
+                    Some(report.times),
+                    report.balance,
+                );
+                (Some(kernel), report.initial_events, report.trace)
+            }
+        };
+        let wall = start.elapsed().as_secs_f64();
+        Ok(tally.report(&options, wall, &initial_events, kernel, trace))
+    }
+}
+
+/// Runs `model` from `initial` for `steps` steps with `options`, handing every committed
+/// frame to `sink` ([`Runner::run`]).
+pub fn run_model<M: CellModel + 'static>(
+    model: M,
+    grid: Grid,
+    initial: Vec<M::State>,
+    options: &RunOptions,
+    steps: u64,
+    sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+) -> Result<ModelReport, ExecError> {
+    Runner::new(model, grid, initial)
+        .options(options.clone())
+        .run(steps, sink)
+}
+
+/// What the runner counts from the frames as they pass.
+struct Tally<M: CellModel> {
+    /// Entities at the previous committed step.
+    previous: usize,
+    entity_steps: u64,
+    steps: u64,
+    last_step: Step,
+    hash: u64,
+    entities: usize,
+    events: BTreeMap<String, u64>,
+    stopped: bool,
+    _model: std::marker::PhantomData<M>,
+}
+
+impl<M: CellModel> Tally<M> {
+    fn new(grid: &Grid, initial: &[M::State]) -> Self {
+        let mut ignored = Vec::new();
+        let state = CellStates::binned::<M>(grid, initial.to_vec(), 0, &mut ignored);
+        Tally {
+            previous: state.len(),
+            entity_steps: 0,
+            steps: 0,
+            last_step: 0,
+            hash: state.hash::<M>(),
+            entities: state.len(),
+            events: BTreeMap::new(),
+            stopped: false,
+            _model: std::marker::PhantomData,
+        }
+    }
+
+    fn count(&mut self, events: &[Event<M::Event>]) {
+        for e in events {
+            *self.events.entry(M::event_name(&e.kind)).or_default() += 1;
+        }
+    }
+
+    fn frame(&mut self, f: &Frame<M::Event>) {
+        self.entity_steps += self.previous as u64;
+        self.previous = f.bodies;
+        self.steps += 1;
+        self.last_step = f.step;
+        self.hash = f.hash;
+        self.entities = f.bodies;
+        self.count(&f.events);
+    }
+
+    fn report(
+        mut self,
+        options: &RunOptions,
+        wall: f64,
+        initial_events: &[Event<M::Event>],
+        kernel: Option<KernelReport>,
+        trace: Option<crate::kernel::RunTrace>,
+    ) -> ModelReport {
+        self.count(initial_events);
+        ModelReport {
+            executor: options.executor.name().into(),
+            steps: self.steps,
+            stopped_at: self.stopped.then_some(self.last_step),
+            wall_seconds: wall,
+            steps_per_second: self.steps as f64 / wall.max(1e-9),
+            entity_steps_per_second: self.entity_steps as f64 / wall.max(1e-9),
+            hash: hex(self.hash),
+            entities: self.entities,
+            events: self.events,
+            kernel,
+            trace,
+        }
+    }
+}
+
+fn kernel_report(
+    options: &RunOptions,
+    threads: usize,
+    schedule: Option<String>,
+    counters: Counters,
+    thread_times: Option<ThreadTimes>,
+    balance_rounds: Vec<RoundRecord>,
+) -> KernelReport {
+    KernelReport {
+        worlds: counters.worlds.len(),
+        threads,
+        mode: options.kernel.mode,
+        window: options.kernel.window,
+        partition: options.kernel.partition.clone(),
+        schedule,
+        efficiency: counters.total.efficiency(),
+        counters,
+        thread_times,
+        balance: options.kernel.balance.clone(),
+        balance_rounds,
+    }
+}
