@@ -35,11 +35,11 @@ use rapier_world::RapierWorld;
 use common::{measure_pile, soda_pile, Footprint, PileBody, PileMetrics};
 use knobs::median;
 use serde::Serialize;
-use soda::EventKind;
 use soda::physics::Body;
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 use soda::sim::Simulation;
+use soda::EventKind;
 use std::path::PathBuf;
 use std::time::Instant;
 

@@ -21,6 +21,7 @@ pub mod hash;
 pub mod kernel;
 pub mod math;
 pub mod model;
+pub mod models;
 pub mod physics;
 pub mod scaling;
 pub mod scene;
