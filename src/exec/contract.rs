@@ -40,26 +40,26 @@ pub fn check_cell_outputs<M: CellModel>(
     step: Step,
     out: &[M::State],
 ) -> Result<(), ContractViolation> {
-    for pair in out.windows(2) {
+    let mut ids: Vec<u64> = out.iter().map(|s| M::id(s)).collect();
+    ids.sort_unstable();
+    if let Some(pair) = ids.windows(2).find(|p| p[0] == p[1]) {
+        return Err(violation(
+            ContractRule::UniqueIds,
+            step,
+            cell,
+            pair[0],
+            format!("the cell's output holds id {} twice", pair[0]),
+        ));
+    }
+    if let Some(pair) = out.windows(2).find(|p| M::id(&p[0]) > M::id(&p[1])) {
         let (a, b) = (M::id(&pair[0]), M::id(&pair[1]));
-        if a == b {
-            return Err(violation(
-                ContractRule::UniqueIds,
-                step,
-                cell,
-                a,
-                format!("the cell's output holds id {a} twice"),
-            ));
-        }
-        if a > b {
-            return Err(violation(
-                ContractRule::SortedOutputs,
-                step,
-                cell,
-                b,
-                format!("id {b} was appended after id {a}"),
-            ));
-        }
+        return Err(violation(
+            ContractRule::SortedOutputs,
+            step,
+            cell,
+            b,
+            format!("id {b} was appended after id {a}"),
+        ));
     }
     for s in out {
         if let Some(home) = grid.cell_of(M::position(s)) {

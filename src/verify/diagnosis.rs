@@ -99,7 +99,11 @@ pub(crate) fn diagnose(report: &VerifyReport) -> Vec<Diagnosis> {
         && failed
             .iter()
             .all(|r| matches!(r.outcome, RunOutcome::Diverged(_)));
-    if only_cell && out.is_empty() {
+    if !out.is_empty() {
+        // The model's own faults above explain the divergences.
+        return out;
+    }
+    if only_cell {
         out.push(Diagnosis::OnlyCellModeDiverged { runs: failed.len() });
     } else {
         out.push(Diagnosis::Diverged {
