@@ -255,15 +255,15 @@ impl CellModel for Epidemic {
                 Health::Recovered => {}
             }
             a.vel = self.steer(me, &near);
-            for k in 0..3 {
-                a.pos[k] += a.vel[k];
-                if a.pos[k] < 0.0 {
-                    a.pos[k] = -a.pos[k];
-                    a.vel[k] = -a.vel[k];
+            for ((p, v), hi) in a.pos.iter_mut().zip(&mut a.vel).zip(hi) {
+                *p += *v;
+                if *p < 0.0 {
+                    *p = -*p;
+                    *v = -*v;
                 }
-                if a.pos[k] >= hi[k] {
-                    a.pos[k] = (2.0 * hi[k] - a.pos[k]).min(hi[k] * 0.9999);
-                    a.vel[k] = -a.vel[k];
+                if *p >= hi {
+                    *p = (2.0 * hi - *p).min(hi * 0.9999);
+                    *v = -*v;
                 }
             }
             let healthy = a.health != Health::Infected;
