@@ -117,6 +117,8 @@ pub enum FuzzScene {
     Particles(usize, [i32; 3], bool, u64),
     /// A built-in rigid-body scene: name, bodies, seed.
     Builtin(&'static str, usize, u64),
+    /// A user's own model and states ([`check_model_sync_order`]).
+    Custom,
 }
 
 impl std::fmt::Display for FuzzScene {
@@ -133,6 +135,7 @@ impl std::fmt::Display for FuzzScene {
             FuzzScene::Builtin(name, n, seed) => {
                 write!(f, "built-in `{name}` with {n} bodies, seed {seed}")
             }
+            FuzzScene::Custom => write!(f, "the caller's model and states"),
         }
     }
 }
@@ -257,7 +260,82 @@ pub fn check_case(case: &SyncOrderCase) -> Result<(), String> {
                 .unwrap_or_else(|e| panic!("built-in scene {name} with {n} bodies: {e}"));
             compare(scene.model(), scene.grid(), scene.initial_bodies(), case)
         }
+        FuzzScene::Custom => Err(
+            "a custom scene is checked with check_model_sync_order, which holds the model".into(),
+        ),
     }
+}
+
+/// A kernel configuration and a step count from fuzz bytes, for fuzzing the
+/// synchronisation order of *any* model ([`check_model_sync_order`]): six header bytes
+/// (worlds 1–8, rollback mode, window 1–16, partitioner, partition seed, steps
+/// 1–`max_steps`), then the bytes that drive every decision of the virtual executor.
+/// `None` if fewer than six bytes.
+///
+/// A cargo-fuzz target for your own model is then a few lines (see `fuzz/README.md`):
+///
+/// ```
+/// use soda::fuzzing::{check_model_sync_order, fuzz_config};
+/// use soda::kernel::synthetic::Particles;
+///
+/// let data = [3u8, 0, 5, 2, 9, 12, 250, 3, 7, 1];
+/// if let Some((config, steps)) = fuzz_config(&data, 20) {
+///     let (model, grid, initial) = Particles::scene(24, [4, 2, 2], false, 1);
+///     check_model_sync_order(model, grid, initial, &config, steps).unwrap();
+/// }
+/// ```
+pub fn fuzz_config(bytes: &[u8], max_steps: u64) -> Option<(KernelConfig, u64)> {
+    let [worlds, mode, window, partition, partition_seed, steps] = *bytes.get(..6)? else {
+        return None;
+    };
+    let mode = [
+        RollbackMode::Cell,
+        RollbackMode::World,
+        RollbackMode::Conservative,
+    ][usize::from(mode % 3)];
+    let partition = [
+        PartitionKind::Blocks,
+        PartitionKind::KMeans,
+        PartitionKind::Random,
+    ][usize::from(partition % 3)]
+    .clone();
+    let config = KernelConfig::new(1 + usize::from(worlds % 8))
+        .mode(mode)
+        .window(1 + u64::from(window % 16))
+        .partition(partition)
+        .partition_seed(u64::from(partition_seed))
+        .schedule(crate::kernel::ScheduleSpec::Bytes(bytes[6..].to_vec()))
+        .record_schedule(true);
+    Some((config, 1 + u64::from(steps) % max_steps.max(1)))
+}
+
+/// Runs `model` from `initial` for `steps` steps in the reference executor and in the
+/// virtual executor under `config` (whose schedule drives the synchronisation order), and
+/// compares every committed frame (step, hash, entity count, events). On a mismatch the
+/// error names the first differing step, both hashes, the configuration and the schedule
+/// string that replays the run. Works for any model: the public face of the `sync_order`
+/// fuzz target.
+///
+/// # Panics
+/// If the kernel itself panics (a locality violation it detects, a deadlock): that is a
+/// finding too.
+pub fn check_model_sync_order<M: CellModel + Clone>(
+    model: M,
+    grid: Grid,
+    initial: Vec<M::State>,
+    config: &KernelConfig,
+    steps: u64,
+) -> Result<(), String> {
+    compare(
+        model,
+        grid,
+        initial,
+        &SyncOrderCase {
+            scene: FuzzScene::Custom,
+            steps,
+            config: config.clone(),
+        },
+    )
 }
 
 fn compare<M: CellModel + Clone>(
