@@ -46,8 +46,40 @@ impl<'a, S> Neighbourhood<'a, S> {
     }
 }
 
-/// A deterministic cell model (DESIGN.md §3): stepping a cell is a pure function of the
-/// step-`t` states of its 27-cell neighbourhood and the model's static data.
+/// A deterministic cell model: stepping a cell is a pure function of the step-`t` states of
+/// its 27-cell neighbourhood and the model's static data (SPEC.md §4). Implement it for your
+/// own entities and every executor, `verify`, the fuzzing checks and the CLI run it.
+///
+/// # The rules a model keeps
+///
+/// The kernel's guarantee — every executor commits the reference's bits — holds exactly when
+/// these do. The contract checker ([`crate::exec::contract`], always run by `verify`) finds
+/// the breaches it can and names the rule, entity, cell and step.
+///
+/// 1. **Pure steps.** [`step_cell`](Self::step_cell) reads only its arguments (`step`,
+///    `grid`, the neighbourhood) and the model's own fields, which never change during a
+///    run: no interior mutability, no global or thread-local state, no clock, no
+///    `std::collections::HashMap`/`HashSet` iteration order, no unseeded randomness (seed a
+///    `rand_chacha` generator from the entity, the step and a seed of the model). The same
+///    cell may be computed many times (rollbacks, other worlds, the checker).
+/// 2. **Unique ids.** Every entity of a state has its own [`id`](Self::id); the canonical
+///    order everywhere is ascending id. A model that creates entities must give them ids no
+///    other entity can get, whichever cell computes them (e.g. derived from the parent's id
+///    range, never from a shared counter).
+/// 3. **One cell per step.** An output's [`position`](Self::position) lies in the
+///    27-cell neighbourhood of the cell that computed it (its home cell at step `t + 1` is at
+///    most one cell away on each axis), or outside the grid — then the kernel removes it with
+///    a [`LeftGrid`] event. The cell edge must be at least the distance over which entities
+///    interact, and an entity may not move farther than one cell edge per step.
+/// 4. **Sorted outputs.** `step_cell` appends the next states of the centre cell's
+///    entities, and of any entity it creates, to `out` in ascending id order. It may drop
+///    entities (deaths) and create entities (births); everything it appends is homed by
+///    its new position. On entry, `out` may already hold other cells' outputs: append, never
+///    clear or read it; the same holds for `events`.
+/// 5. **Honest `may_affect`.** If [`may_affect`](Self::may_affect) is overridden, `false`
+///    must mean the reader's step cannot read that neighbour.
+/// 6. **Every bit hashed.** [`hash_state`](Self::hash_state) feeds every bit that a step can
+///    read (else two different states could commit the same hash).
 pub trait CellModel: Send + Sync {
     /// The state of one entity, moved between cells and worlds by the kernel.
     type State: Clone + PartialEq + Debug + Send + Sync + 'static;
