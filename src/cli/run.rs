@@ -58,8 +58,8 @@ pub struct RunArgs {
 pub struct OutputArgs {
     /// Write committed frames to FILE as CSV (header
     /// `step,id,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz`, one row per body per recorded step, in
-    /// id order; see README.md, "Recording format"). About 125 bytes per body per recorded
-    /// step: 1,000 bodies over 600 steps make 75 MB (a warning above 1 GB). Written to a
+    /// id order; see README.md, "Recording format"). About 120 bytes per body per recorded
+    /// step: 1,000 bodies over 600 steps make 70 MB (a warning above 1 GB). Written to a
     /// temporary file and renamed into place at the end or on Ctrl-C.
     #[arg(long, value_name = "FILE")]
     pub record: Option<PathBuf>,
@@ -174,6 +174,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     let (scene, origin) = args.scene.load()?;
     let initial_bodies = scene.bodies.len();
+    // Before any temporary file exists: from here Ctrl-C stops at the next committed step
+    // (or, pressed twice, at once), never leaving a temporary file behind.
+    if let Err(e) = interrupt::install() {
+        eprintln!("warning: Ctrl-C will not stop the run cleanly: {e}");
+    }
     let outputs = Outputs::plan(args, args.steps)?;
     let Outputs {
         mut record,
@@ -204,9 +209,6 @@ pub fn run(args: &RunArgs) -> Result<()> {
         initial.sort_by_key(|b| b.id);
         r.frame_always(0, &initial.iter().collect::<Vec<_>>());
         wanted = r.wanted();
-    }
-    if let Err(e) = interrupt::install() {
-        eprintln!("warning: Ctrl-C will not stop the run cleanly: {e}");
     }
     let progress = progress_bar(args, initial_bodies);
     let report = run_scene(&scene, &options, args.steps, &wanted, |frame, states| {

@@ -60,8 +60,8 @@ pub struct VerifyArgs {
     #[arg(long, value_name = "LIST", default_value = "all", help_heading = "Run")]
     pub modes: String,
 
-    /// Virtual-executor schedule seeds per mode (seeds FIRST..FIRST+K). With --repeats, at
-    /// least one run in all.
+    /// Virtual-executor schedule seeds per mode (seeds FIRST..FIRST+K; `--schedules 0
+    /// --repeats 0` is an error, nothing to check).
     #[arg(long, value_name = "K", default_value_t = 8, help_heading = "Run",
           value_parser = whole(0, u64::MAX))]
     pub schedules: u64,
