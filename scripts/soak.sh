@@ -34,33 +34,35 @@ soda=${CARGO_TARGET_DIR:-$root/target}/release/soda
 
 # 1. Virtual-executor schedules: each verify process checks `chunk` seeds in each of the
 #    three modes; seeds are split evenly between the scenes.
-nscenes=$(wc -w <<<"$scenes")
-per_scene=$(((schedules + nscenes * modes - 1) / (nscenes * modes)))
-rm -f "$out"/verify-*.log
-jobs_file="$out/verify-jobs.txt"
-: >"$jobs_file"
-for scene in $scenes; do
-    for ((first = 0; first < per_scene; first += chunk)); do
-        n=$((per_scene - first < chunk ? per_scene - first : chunk))
-        echo "$scene $first $n $steps $out" >>"$jobs_file"
-    done
-done
-echo "soak: $((per_scene * nscenes * modes)) virtual runs ($per_scene seeds x $modes modes x $nscenes scenes, $steps steps each) in $(wc -l <"$jobs_file") pieces on $jobs processes"
-start=$(date +%s)
-# A diverging piece exits 1; keep going and count from the logs.
-xargs -P "$jobs" -L 1 sh -c '
-    "$0" verify --scene "$1" --first-schedule "$2" --schedules "$3" --repeats 0 --steps "$4" \
-        >"$5/verify-$1-$2.log" 2>&1 || true
-' "$soda" <"$jobs_file"
-verify_seconds=$(($(date +%s) - start))
-runs=$(cat "$out"/verify-*.log | grep -c '^ok ' || true)
-diverged=$(cat "$out"/verify-*.log | grep -c '^DIVERGED' || true)
-failed=$(grep -L '^all .* runs committed' "$out"/verify-*.log | wc -l)
-echo "verify: $runs runs matched, $diverged diverged, $failed pieces failed, ${verify_seconds} s wall"
 status=0
-if [ "$diverged" -ne 0 ] || [ "$failed" -ne 0 ]; then
-    grep -h -A1 '^DIVERGED' "$out"/verify-*.log | head -20
-    status=1
+if [ "$schedules" -gt 0 ]; then
+    nscenes=$(wc -w <<<"$scenes")
+    per_scene=$(((schedules + nscenes * modes - 1) / (nscenes * modes)))
+    rm -f "$out"/verify-*.log
+    jobs_file="$out/verify-jobs.txt"
+    : >"$jobs_file"
+    for scene in $scenes; do
+        for ((first = 0; first < per_scene; first += chunk)); do
+            n=$((per_scene - first < chunk ? per_scene - first : chunk))
+            echo "$scene $first $n $steps $out" >>"$jobs_file"
+        done
+    done
+    echo "soak: $((per_scene * nscenes * modes)) virtual runs ($per_scene seeds x $modes modes x $nscenes scenes, $steps steps each) in $(wc -l <"$jobs_file") pieces on $jobs processes"
+    start=$(date +%s)
+    # A diverging piece exits 1; keep going and count from the logs.
+    xargs -r -P "$jobs" -L 1 sh -c '
+        "$0" verify --scene "$1" --first-schedule "$2" --schedules "$3" --repeats 0 --steps "$4" \
+            >"$5/verify-$1-$2.log" 2>&1 || true
+    ' "$soda" <"$jobs_file"
+    verify_seconds=$(($(date +%s) - start))
+    runs=$(cat "$out"/verify-*.log | grep -c '^ok ' || true)
+    diverged=$(cat "$out"/verify-*.log | grep -c '^DIVERGED' || true)
+    failed=$(grep -L '^all .* runs committed' "$out"/verify-*.log | wc -l)
+    echo "verify: $runs runs matched, $diverged diverged, $failed pieces failed, ${verify_seconds} s wall"
+    if [ "$diverged" -ne 0 ] || [ "$failed" -ne 0 ]; then
+        grep -h -A1 '^DIVERGED' "$out"/verify-*.log | head -20
+        status=1
+    fi
 fi
 
 # 2. Fuzzing the synchronisation order.
@@ -69,13 +71,16 @@ if [ "$fuzz_seconds" -gt 0 ]; then
         cargo install cargo-fuzz --locked
     fi
     mkdir -p fuzz/corpus/sync_order
+    # The fuzz crate builds into fuzz/target with its own flags, never into the main target.
+    (cd fuzz && env -u CARGO_TARGET_DIR cargo fuzz build --sanitizer none sync_order)
     start=$(date +%s)
     fuzz_status=0
-    (cd fuzz && cargo fuzz run --sanitizer none sync_order corpus/sync_order regressions/sync_order \
+    (cd fuzz && env -u CARGO_TARGET_DIR cargo fuzz run --sanitizer none sync_order \
+        corpus/sync_order regressions/sync_order \
         -- -max_total_time="$fuzz_seconds" -print_final_stats=1) >"$out/fuzz.log" 2>&1 || fuzz_status=$?
     fuzz_seconds_run=$(($(date +%s) - start))
     execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$out/fuzz.log" | grep -o '[0-9]*$' | tail -1)
-    echo "fuzz: ${execs:-?} sync_order executions, exit status $fuzz_status, ${fuzz_seconds_run} s wall (build included)"
+    echo "fuzz: ${execs:-?} sync_order executions, exit status $fuzz_status, ${fuzz_seconds_run} s wall"
     if [ "$fuzz_status" -ne 0 ]; then
         grep -E 'divergen|panicked|SUMMARY' "$out/fuzz.log" | head -10
         status=1

@@ -405,6 +405,10 @@ fn negative_and_zero_numbers_get_messages_that_say_what_to_give() {
         (&["run", "--seed", "-1"][..], "--seed"),
         (&["run", "--objects", "-5"][..], "--objects"),
         (&["verify", "--schedules", "-2"][..], "--schedules"),
+        (
+            &["scenes", "--dump", "chain", "--objects", "-1"][..],
+            "--objects",
+        ),
     ] {
         let err = usage_error(args);
         assert!(
