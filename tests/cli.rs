@@ -899,3 +899,21 @@ fn experiment_runs_commit_the_reference_hash() {
         assert_eq!(l.split(',').nth(col).unwrap(), reference, "{l}");
     }
 }
+
+/// The planted-bug commands README.md shows (`soda verify`): each must still fire, or the
+/// checker can no longer be shown to work. Only the virtual runs (seeded, so every run
+/// replays exactly) are counted; threaded interleavings may or may not hit the bug.
+#[test]
+fn every_planted_bug_fires_on_its_documented_command() {
+    for bug in ["cutoff-by-ids-only", "drop-lone-anti"] {
+        let args = ["verify", "--scene", "sparse-gas", "--planted-bug", bug];
+        let o = soda(&args);
+        let out = stdout(&o);
+        assert_eq!(o.status.code(), Some(1), "soda {args:?}:\n{out}");
+        assert!(
+            out.lines().any(|l| l.starts_with("DIVERGED virtual")),
+            "soda {args:?}: no virtual run diverged:\n{out}"
+        );
+        reproduces_a_divergence(&out, &["--scene", "sparse-gas", "--objects", "125"]);
+    }
+}

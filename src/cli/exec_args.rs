@@ -1,6 +1,7 @@
 //! Options choosing the executor and the Time Warp kernel's configuration, shared by the
 //! commands that run a scene.
 
+use super::numbers::whole;
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use soda::exec::virtual_exec::parse_schedule;
@@ -64,9 +65,9 @@ impl From<GhostsArg> for GhostPolicy {
 pub enum PartitionArg {
     /// Axis-aligned blocks.
     Blocks,
-    /// The thesis's equal-size k-means over body positions (seeded by --partition-seed).
+    /// The thesis's equal-size k-means over body positions (seeded).
     Kmeans,
-    /// Every cell to a random world (the most fragmented territories).
+    /// Every cell to a random world, the most fragmented territories (seeded).
     Random,
 }
 
@@ -90,29 +91,31 @@ pub struct ExecutorArgs {
     /// Number of worlds (logical processes) [default: the thread count for `threaded`
     /// (more worlds than threads make idle worlds race ahead and roll back), 4 for
     /// `virtual`]. Virtual and threaded only.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=4096))]
+    #[arg(long, value_name = "N", value_parser = whole(1, 4096))]
     pub worlds: Option<u64>,
     /// OS threads of the threaded executor [default: the available cores].
-    #[arg(long, value_name = "T", value_parser = clap::value_parser!(u64).range(1..=256))]
+    #[arg(long, value_name = "T", value_parser = whole(1, 256))]
     pub threads: Option<u64>,
     /// Rollback mode [default: cell]. Virtual and threaded only.
     #[arg(long, value_enum, value_name = "MODE")]
     pub mode: Option<ModeArg>,
     /// Optimism window: no world computes past GVT + W [default: 16]. Virtual and threaded
     /// only.
-    #[arg(long, value_name = "W", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    #[arg(long, value_name = "W", value_parser = whole(1, 1_000_000))]
     pub window: Option<u64>,
     /// How cells are assigned to worlds [default: blocks]. Virtual and threaded only.
     #[arg(long, value_enum, value_name = "KIND")]
     pub partition: Option<PartitionArg>,
-    /// Seed of the kmeans and random partitioners [default: 0].
-    #[arg(long, value_name = "S")]
+    /// Seed of the kmeans and random partitioners [default: 0]. With --partition kmeans or
+    /// random only.
+    #[arg(long, value_name = "S", value_parser = whole(0, u64::MAX))]
     pub partition_seed: Option<u64>,
     /// Seed of the virtual executor's scheduler [default: 0]: the same seed replays the
     /// same interleaving exactly.
-    #[arg(long, value_name = "S", conflicts_with = "schedule")]
+    #[arg(long, value_name = "S", conflicts_with = "schedule", value_parser = whole(0, u64::MAX))]
     pub schedule_seed: Option<u64>,
-    /// Replay a schedule string (`v1:...`) printed by `soda verify` or a fuzz target.
+    /// Replay a schedule string (`v1:...`), as printed by the `sync_order` fuzz target on a
+    /// divergence (README.md, "Checking determinism yourself").
     #[arg(long, value_name = "STRING")]
     pub schedule: Option<String>,
     /// Ghost policy of the optimistic modes [default: delta]: `delta` sends a border cell's
@@ -124,7 +127,7 @@ pub struct ExecutorArgs {
     /// Threaded executor: steps a world may compute ahead of its slowest neighbour world
     /// before it lets laggards run first [default: 0, near lockstep]. Larger values let
     /// worlds speculate past slower neighbours (up to the window) at the risk of rollbacks.
-    #[arg(long, value_name = "STEPS", value_parser = clap::value_parser!(u64).range(0..=1_000_000))]
+    #[arg(long, value_name = "STEPS", value_parser = whole(0, 1_000_000))]
     pub lead: Option<u64>,
     /// Dynamic load balancing by cell cession [default: off]: every --balance-period steps,
     /// at a committed step, overloaded worlds give cells to their neighbours and starving
@@ -132,7 +135,7 @@ pub struct ExecutorArgs {
     #[arg(long, value_enum, value_name = "off|on")]
     pub balance: Option<BalanceArg>,
     /// Steps between balancing rounds [default: 20].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    #[arg(long, value_name = "N", value_parser = whole(1, 1_000_000))]
     pub balance_period: Option<u64>,
     /// Back off when balanced [default: on]: after a round that moves no cell the next one
     /// comes twice as many steps later (at most 4 periods); a round that moves cells brings
@@ -154,12 +157,12 @@ pub struct ExecutorArgs {
     #[arg(long, value_name = "A")]
     pub balance_smoothing: Option<f64>,
     /// Rounds during which a cell that moved stays put [default: 2].
-    #[arg(long, value_name = "R")]
+    #[arg(long, value_name = "R", value_parser = whole(0, u64::MAX))]
     pub balance_cooldown: Option<u64>,
     /// Workers the load is shared between [default: the thread count for `threaded`, the
     /// world count for `virtual`]: load levels are taken against total / workers, so with
     /// fewer threads than worlds the load gathers in as many territories as threads.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    #[arg(long, value_name = "N", value_parser = whole(1, 1_000_000))]
     pub balance_workers: Option<u64>,
     /// A deliberate kernel bug, to prove the checks can fire (never for real runs).
     #[arg(long, value_enum, hide = true)]
@@ -232,19 +235,19 @@ impl ExecutorArgs {
             ExecutorArg::Virtual => ExecutorKind::Virtual,
             ExecutorArg::Threaded => ExecutorKind::Threaded,
         };
-        if executor == ExecutorKind::Reference {
-            if let Some((flag, _)) = kernel_flags.iter().chain(&virtual_flags).find(|f| f.1) {
-                bail!(
-                    "{flag} configures the Time Warp worlds, which the reference executor does \
-                     not have: add `--executor virtual` or `--executor threaded`"
-                );
-            }
-        }
         if executor != ExecutorKind::Virtual {
             if let Some((flag, _)) = virtual_flags.iter().find(|f| f.1) {
                 bail!(
                     "{flag} drives the virtual executor's scheduler: add `--executor virtual` \
                      (threaded runs are scheduled by the operating system)"
+                );
+            }
+        }
+        if executor == ExecutorKind::Reference {
+            if let Some((flag, _)) = kernel_flags.iter().find(|f| f.1) {
+                bail!(
+                    "{flag} configures the Time Warp worlds, which the reference executor does \
+                     not have: add `--executor virtual` or `--executor threaded`"
                 );
             }
         }
@@ -255,6 +258,13 @@ impl ExecutorArgs {
             bail!(
                 "--lead paces the threaded executor's worlds: add `--executor threaded` (the \
                  virtual executor's pace is its schedule)"
+            );
+        }
+        let partition = self.partition.map_or(PartitionKind::Blocks, Into::into);
+        if self.partition_seed.is_some() && partition == PartitionKind::Blocks {
+            bail!(
+                "--partition-seed seeds the kmeans and random partitioners, and blocks has \
+                 nothing random: add `--partition kmeans` or `--partition random`, or drop it"
             );
         }
         let schedule = match (&self.schedule, self.schedule_seed) {
@@ -271,7 +281,7 @@ impl ExecutorArgs {
         let mut kernel = KernelConfig::new(self.worlds.map_or(default_worlds, |w| w as usize))
             .mode(self.mode.map_or(RollbackMode::Cell, Into::into))
             .window(self.window.unwrap_or(16))
-            .partition(self.partition.map_or(PartitionKind::Blocks, Into::into))
+            .partition(partition)
             .partition_seed(self.partition_seed.unwrap_or(0))
             .schedule(schedule)
             .lead(self.lead.unwrap_or(0))

@@ -86,8 +86,7 @@ struct Row {
 
 /// Runs the command.
 pub fn experiment(args: &ExperimentArgs) -> Result<()> {
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the directory {}", args.out.display()))?;
+    super::plan::OutputPlan::new().dir("--out", &args.out)?;
     let stem = args.name.file_stem();
     let csv = args.out.join(format!("{stem}.csv"));
     let svg = args.out.join(format!("{stem}.svg"));
@@ -114,7 +113,7 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
         }
         text.push_str(&csv_line(cols.iter().map(|c| &c.1)));
     }
-    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+    super::atomic::write(path, text.as_bytes())
 }
 
 fn scene(name: &str, bodies: usize, seed: u64) -> Result<Scene> {
@@ -237,7 +236,7 @@ fn model_scalability(s: &Scene, steps: u64, measured: &[(f64, f64)], svg: &Path)
         flow.push((p as f64, pr.dataflow_speedup()));
     }
     let csv = svg.with_file_name("scalability-model.csv");
-    std::fs::write(&csv, text).with_context(|| format!("cannot write {}", csv.display()))?;
+    super::atomic::write(&csv, text.as_bytes())?;
     let chart = svg.with_file_name("scalability-model.svg");
     charts::line_chart(
         &chart,

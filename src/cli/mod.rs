@@ -3,10 +3,14 @@
 //! later commands (`verify`, benchmarks) and later `run` options (executor, worlds, threads,
 //! rollback mode, window, partition, schedule seed) slot in without reshaping the rest.
 
+mod atomic;
 mod charts;
 mod exec_args;
 mod experiment;
+mod interrupt;
+mod numbers;
 mod output;
+mod plan;
 mod plot;
 mod record;
 mod run;
@@ -39,17 +43,21 @@ enum Command {
     ///
     /// With no arguments: the built-in `falling-cubes` scene, 1,000 cubes, 600 steps, on the
     /// reference executor.
-    #[command(after_help = run::AFTER_HELP)]
+    #[command(after_help = run::AFTER_HELP, allow_negative_numbers = true)]
     Run(Box<run::RunArgs>),
     /// List the built-in scenes, or print one as a TOML scene file to start your own from.
-    #[command(after_help = scenes::AFTER_HELP)]
+    #[command(after_help = scenes::AFTER_HELP, allow_negative_numbers = true)]
     Scenes(scenes::ScenesArgs),
     /// Check that the virtual and threaded executors commit the reference's bits: every
     /// step's hash, under many schedules, thread interleavings and rollback modes.
     ///
     /// A divergence is reported as the first step, body, field and cell that differ, with
     /// the command that reproduces it; the exit status is then 1.
-    #[command(after_help = verify::AFTER_HELP)]
+    #[command(
+        after_help = verify::AFTER_HELP,
+        allow_negative_numbers = true,
+        mut_arg("objects", |a| a.help(verify::OBJECTS_HELP))
+    )]
     Verify(verify::VerifyArgs),
     /// Draw a trace written by `soda run --trace`: a space-time diagram (each world's LVT
     /// over wall time, rollbacks as drops, the GVT line), a territory map and a rollback heat
@@ -64,7 +72,7 @@ enum Command {
 /// Parses the command line, runs the command and turns any error into a message on stderr
 /// and exit status 1 (usage errors exit with clap's status 2).
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = Cli::parse_from(help_help(std::env::args_os().collect()));
     let result = match cli.command {
         Command::Run(args) => run::run(&args),
         Command::Scenes(args) => scenes::scenes(&args),
@@ -84,6 +92,18 @@ pub fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `soda help --help` (or `-h`) asks for help about `help`: clap's built-in `help`
+/// subcommand takes no options and would exit with a usage error, so it is read as
+/// `soda --help`.
+fn help_help(mut args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
+    let is = |i: usize, words: &[&str]| args.get(i).is_some_and(|a| words.iter().any(|w| a == w));
+    if is(1, &["help"]) && (2..args.len()).any(|i| is(i, &["--help", "-h"])) {
+        args.truncate(1);
+        args.push("--help".into());
+    }
+    args
 }
 
 #[cfg(test)]

@@ -34,8 +34,9 @@ pub fn plot(args: &PlotArgs) -> Result<()> {
             args.trace.display()
         )
     })?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create the directory {}", args.out.display()))?;
+    let mut plan = super::plan::OutputPlan::new();
+    plan.input("the trace", &args.trace);
+    plan.dir("--out", &args.out)?;
     let spacetime = args.out.join("spacetime.svg");
     let territory = args.out.join("territory.svg");
     let heatmap = args.out.join("heatmap.svg");

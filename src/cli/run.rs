@@ -1,7 +1,10 @@
 //! `soda run`: run a scene and print a summary (or the report as JSON).
 
+use super::atomic::{self, AtomicFile};
 use super::exec_args::ExecutorArgs;
+use super::interrupt;
 use super::output::print;
+use super::plan::OutputPlan;
 use super::record::Recorder;
 use super::source::{Origin, SceneArgs};
 use anyhow::{bail, Context, Result};
@@ -9,7 +12,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::frame::StatesWanted;
 use soda::sim::{run_scene, RunReport};
-use soda::{Body, RigidBodyModel};
+use soda::{Body, Frame, RigidBodyModel};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 
@@ -24,7 +27,12 @@ Examples:
   soda run --executor threaded --threads 2 --worlds 8 --objects 8000
 
 The summary's last line is `hash` and the final state hash (16 hex digits): two runs of
-the same scene and options always print the same hash.";
+the same scene and options always print the same hash.
+
+Every output path is checked before step 1. Files are written under a temporary name
+and renamed into place, so each is the old file or a whole new one. Ctrl-C stops at the
+next committed step, keeps the --record file (whole frames so far), prints
+`interrupted at step N, hash H` and exits with 130.";
 
 /// Options of `soda run`.
 #[derive(Debug, Args)]
@@ -33,7 +41,8 @@ pub struct RunArgs {
     pub scene: SceneArgs,
 
     /// Number of steps to compute (600 steps of 1/60 s = 10 simulated seconds).
-    #[arg(long, value_name = "N", default_value_t = 600, help_heading = "Run")]
+    #[arg(long, value_name = "N", default_value_t = 600, help_heading = "Run",
+          value_parser = super::numbers::whole(0, u64::MAX))]
     pub steps: u64,
 
     #[command(flatten)]
@@ -49,13 +58,15 @@ pub struct RunArgs {
 pub struct OutputArgs {
     /// Write committed frames to FILE as CSV (header
     /// `step,id,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz`, one row per body per recorded step, in
-    /// id order; see README.md, "Recording format").
+    /// id order; see README.md, "Recording format"). About 120 bytes per body per recorded
+    /// step: 1,000 bodies over 600 steps make 70 MB (a warning above 1 GB). Written to a
+    /// temporary file and renamed into place at the end or on Ctrl-C.
     #[arg(long, value_name = "FILE")]
     pub record: Option<PathBuf>,
 
     /// With --record: record the initial state, every K-th step and the last step.
     #[arg(long, value_name = "K", default_value_t = 1, requires = "record",
-          value_parser = clap::value_parser!(u64).range(1..))]
+          value_parser = super::numbers::whole(1, u64::MAX))]
     pub record_every: u64,
 
     /// Print the run report as JSON on stdout (with the final `hash`) instead of the summary.
@@ -87,6 +98,62 @@ pub struct OutputArgs {
     pub territories: Option<PathBuf>,
 }
 
+/// The output files of a run, checked (and the streamed or held ones opened under their
+/// temporary names) before step 1.
+struct Outputs {
+    record: Option<Recorder>,
+    counters: Option<AtomicFile>,
+    trace: Option<AtomicFile>,
+    csv: Option<PathBuf>,
+    territories: Option<PathBuf>,
+}
+
+impl Outputs {
+    /// Checks every output path of `args` against each other and the scene file and opens
+    /// what can be opened; nothing is computed yet.
+    fn plan(args: &RunArgs, steps: u64) -> Result<Outputs> {
+        let out = &args.output;
+        let mut plan = OutputPlan::new();
+        if let Some(scene) = args.scene.file() {
+            plan.input("the scene file", scene);
+        }
+        let record = match &out.record {
+            Some(path) => {
+                let target = plan.file("--record", path)?;
+                Some(Recorder::create(&target, out.record_every, steps)?)
+            }
+            None => None,
+        };
+        let counters = match &out.counters {
+            Some(path) => Some(AtomicFile::create(&plan.file("--counters", path)?)?),
+            None => None,
+        };
+        let trace = match &out.trace {
+            Some(path) => Some(AtomicFile::create(&plan.file("--trace", path)?)?),
+            None => None,
+        };
+        let csv = match &out.csv {
+            Some(path) => {
+                let target = plan.file("--csv", path)?;
+                super::table::check_table(&target)?;
+                Some(target)
+            }
+            None => None,
+        };
+        let territories = match &out.territories {
+            Some(dir) => Some(plan.dir("--territories", dir)?),
+            None => None,
+        };
+        Ok(Outputs {
+            record,
+            counters,
+            trace,
+            csv,
+            territories,
+        })
+    }
+}
+
 /// Runs the command.
 pub fn run(args: &RunArgs) -> Result<()> {
     let mut options = args.executor.options()?;
@@ -107,13 +174,29 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     let (scene, origin) = args.scene.load()?;
     let initial_bodies = scene.bodies.len();
-    let last = args.steps;
-    let mut recorder = match &args.output.record {
-        Some(path) => Some(Recorder::create(path, args.output.record_every, last)?),
-        None => None,
-    };
+    // Before any temporary file exists: from here Ctrl-C stops at the next committed step
+    // (or, pressed twice, at once), never leaving a temporary file behind.
+    if let Err(e) = interrupt::install() {
+        eprintln!("warning: Ctrl-C will not stop the run cleanly: {e}");
+    }
+    let outputs = Outputs::plan(args, args.steps)?;
+    let Outputs {
+        mut record,
+        counters,
+        trace,
+        csv,
+        territories,
+    } = outputs;
     let mut wanted = StatesWanted::none();
-    if let Some(r) = recorder.as_mut() {
+    if let Some(r) = record.as_mut() {
+        let estimate = super::record::estimated_bytes(
+            initial_bodies as u64,
+            args.steps,
+            args.output.record_every,
+        );
+        if let Some(path) = &args.output.record {
+            super::record::warn_if_large(path, estimate);
+        }
         let grid = scene.grid();
         let mut initial: Vec<Body> = scene
             .initial_bodies()
@@ -129,48 +212,131 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     let progress = progress_bar(args, initial_bodies);
     let report = run_scene(&scene, &options, args.steps, &wanted, |frame, states| {
-        if let (Some(r), Some(states)) = (recorder.as_mut(), states) {
+        if let (Some(r), Some(states)) = (record.as_mut(), states) {
             r.frame(frame.step, states);
         }
         progress.inc(1);
+        if interrupt::requested() {
+            progress.finish_and_clear();
+            interrupted(frame, record.take(), args.output.record.as_deref());
+        }
     })
     .with_context(|| format!("the {} executor failed", options.executor.name()))?;
     progress.finish_and_clear();
-    let recorded = recorder.map(Recorder::finish).transpose()?;
+    // From here on a failed write does not lose the run: the summary and hash are printed
+    // first, then the errors.
+    let mut failures: Vec<anyhow::Error> = Vec::new();
+    let recorded = match record.map(Recorder::finish) {
+        Some(Ok((_, frames))) => Some(frames),
+        Some(Err(e)) => {
+            failures.push(e);
+            None
+        }
+        None => None,
+    };
     // The report as JSON, formatted once for --json and --counters.
-    let report_json = if args.output.json || args.output.counters.is_some() {
+    let report_json = if args.output.json || counters.is_some() {
         let text = serde_json::to_string_pretty(&report).context("cannot format the report")?;
         text + "\n"
     } else {
         String::new()
     };
-    if let Some(path) = &args.output.counters {
-        std::fs::write(path, &report_json)
-            .with_context(|| format!("cannot write the counters to {}", path.display()))?;
+    if let Some(file) = counters {
+        if let Err(e) = commit_text(file, &report_json) {
+            failures.push(e.context("--counters: the report was not written"));
+        }
     }
-    if let Some(path) = &args.output.csv {
-        super::table::append_run_row(path, &report, initial_bodies)?;
+    if let Some(path) = &csv {
+        if let Err(e) = super::table::append_run_row(path, &report, initial_bodies) {
+            failures.push(e.context("--csv: the run's row was not added"));
+        }
     }
-    if let (Some(path), Some(trace)) = (&args.output.trace, &report.trace) {
-        let text = serde_json::to_string(trace).context("cannot format the trace")?;
-        std::fs::write(path, text + "\n")
-            .with_context(|| format!("cannot write the trace to {}", path.display()))?;
+    if let (Some(file), Some(t)) = (trace, &report.trace) {
+        let written = serde_json::to_string(t)
+            .context("cannot format the trace")
+            .and_then(|text| commit_text(file, &(text + "\n")));
+        if let Err(e) = written {
+            failures.push(e.context("--trace: the trace was not written"));
+        }
     }
-    if let Some(dir) = &args.output.territories {
-        write_territories(dir, &scene, &options, &report)?;
+    if let Some(dir) = &territories {
+        if let Err(e) = write_territories(dir, &scene, &options, &report) {
+            failures.push(e.context("--territories: the maps were not all written"));
+        }
     }
     if args.output.json {
-        print(&report_json)
+        print(&report_json)?;
     } else {
-        let recorded =
-            recorded.map(|(path, frames)| format!("{frames} frames to {}", path.display()));
+        let recorded = recorded.and_then(|frames| {
+            let path = args.output.record.as_ref()?;
+            Some(format!("{frames} frames to {}", path.display()))
+        });
         print(&summary(
             &report,
             &origin,
             initial_bodies,
             recorded.as_deref(),
-        ))
+        ))?;
     }
+    write_failures(failures)
+}
+
+/// Writes `text` to `file` and renames it into place.
+fn commit_text(mut file: AtomicFile, text: &str) -> Result<()> {
+    use std::io::Write;
+    file.write_all(text.as_bytes())
+        .context("cannot write the temporary file")?;
+    file.commit()
+}
+
+/// `Ok` if nothing failed; otherwise one error saying the run itself finished (its summary
+/// and hash are above) and listing every output that was not written.
+fn write_failures(mut failures: Vec<anyhow::Error>) -> Result<()> {
+    match failures.len() {
+        0 => Ok(()),
+        1 => Err(failures.remove(0).context(
+            "the run finished (its summary and hash are above), but an output was not written",
+        )),
+        n => {
+            let list: Vec<String> = failures.iter().map(|e| format!("- {e:#}")).collect();
+            bail!(
+                "the run finished (its summary and hash are above), but {n} outputs were not \
+                 written:\n{}",
+                list.join("\n")
+            )
+        }
+    }
+}
+
+/// Ctrl-C (or SIGTERM) reached the run after committing `frame`: rename the recording into
+/// place (whole frames up to the last one recorded), discard every other output, print the
+/// step and hash reached and exit with 130 (143 for SIGTERM).
+fn interrupted(
+    frame: &Frame<soda::EventKind>,
+    record: Option<Recorder>,
+    path: Option<&std::path::Path>,
+) -> ! {
+    let mut note = format!(
+        "interrupted at step {}, hash {}",
+        frame.step,
+        soda::hash::hex(frame.hash)
+    );
+    if let (Some(r), Some(path)) = (record, path) {
+        let last = r.last_recorded();
+        match r.finish() {
+            Ok((_, frames)) => {
+                note += &format!(
+                    "; {} holds {frames} whole frames (up to step {})",
+                    path.display(),
+                    last.map_or("none".into(), |s| s.to_string())
+                )
+            }
+            Err(e) => note += &format!("; the recording was not written: {e:#}"),
+        }
+    }
+    atomic::discard_all();
+    eprintln!("{note}; no other output written");
+    std::process::exit(i32::from(interrupt::exit_status()))
 }
 
 /// Writes the territory map of the initial partition and after every balancing round, and
@@ -185,8 +351,6 @@ fn write_territories(
     let Some(k) = &report.kernel else {
         return Ok(());
     };
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the directory {}", dir.display()))?;
     let grid = scene.grid();
     let positions: Vec<[f32; 3]> = scene
         .initial_bodies()
@@ -319,9 +483,9 @@ fn summary(
         lines.push((
             "worlds",
             format!(
-                "{} ({:?} partition), mode {}, window {}, {} thread{}",
+                "{} ({} partition), mode {}, window {}, {} thread{}",
                 k.worlds,
-                k.partition,
+                k.partition.name(),
                 k.mode.name(),
                 k.window,
                 k.threads,

@@ -21,10 +21,11 @@ pub struct ScenesArgs {
     #[arg(long, value_name = "NAME")]
     pub dump: Option<String>,
     /// With --dump: number of bodies [default: the scene's own].
-    #[arg(long, value_name = "N", requires = "dump")]
+    #[arg(long, value_name = "N", requires = "dump", value_parser = super::numbers::count)]
     pub objects: Option<usize>,
     /// With --dump: seed of the scene's random jitter [default: 0].
-    #[arg(long, value_name = "S", requires = "dump")]
+    #[arg(long, value_name = "S", requires = "dump",
+          value_parser = super::numbers::whole(0, u64::MAX))]
     pub seed: Option<u64>,
 }
 

@@ -20,11 +20,11 @@ pub struct SceneArgs {
     pub scene: String,
     /// Number of bodies of a built-in scene [default: the scene's own, see `soda scenes`].
     /// Not allowed with a scene file.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = super::numbers::count)]
     pub objects: Option<usize>,
     /// Seed of a built-in scene's random jitter [default: 0]. With a scene file it replaces
     /// the file's `seed` field.
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", value_parser = super::numbers::whole(0, u64::MAX))]
     pub seed: Option<u64>,
 }
 
@@ -49,6 +49,12 @@ impl std::fmt::Display for Origin {
 }
 
 impl SceneArgs {
+    /// The scene file these options name, if they name a file rather than a built-in.
+    pub fn file(&self) -> Option<&Path> {
+        let path = Path::new(&self.scene);
+        SceneFormat::from_path(path).map(|_| path)
+    }
+
     /// Loads and validates the scene these options name.
     pub fn load(&self) -> Result<(Scene, Origin)> {
         let path = Path::new(&self.scene);

@@ -4,6 +4,7 @@
 //! differ with the command that reproduces it. Exits non-zero on any divergence.
 
 use super::exec_args::{default_threads, GhostsArg, ModeArg, PartitionArg, PlantedBugArg};
+use super::numbers::whole;
 use super::output::print;
 use super::source::SceneArgs;
 use anyhow::{bail, Context, Result};
@@ -29,6 +30,11 @@ reference's. A divergence names the first step, body, field and cell that differ
 prints the `soda run` command that reproduces it (virtual runs replay exactly from their
 schedule seed). The exit status is 1 if any run diverged.";
 
+/// The help of `--objects` under `soda verify`, whose built-ins default to
+/// [`VERIFY_OBJECTS`] bodies.
+pub const OBJECTS_HELP: &str = "Number of bodies of a built-in scene [default: 125, small \
+    enough for a quick check; `soda run` uses the scene's own]. Not allowed with a scene file.";
+
 /// Options of `soda verify`.
 #[derive(Debug, Args)]
 pub struct VerifyArgs {
@@ -36,39 +42,53 @@ pub struct VerifyArgs {
     pub scene: SceneArgs,
 
     /// Committed steps to compare per run.
-    #[arg(long, value_name = "N", default_value_t = 60, help_heading = "Run")]
+    #[arg(long, value_name = "N", default_value_t = 60, help_heading = "Run",
+          value_parser = whole(1, u64::MAX))]
     pub steps: u64,
 
     /// Number of worlds.
     #[arg(long, value_name = "N", default_value_t = 8, help_heading = "Run",
-          value_parser = clap::value_parser!(u64).range(1..=4096))]
+          value_parser = whole(1, 4096))]
     pub worlds: u64,
 
     /// Threads of the threaded runs [default: the available cores].
     #[arg(long, value_name = "T", help_heading = "Run",
-          value_parser = clap::value_parser!(u64).range(1..=256))]
+          value_parser = whole(1, 256))]
     pub threads: Option<u64>,
 
     /// Rollback modes to check: `all` or a comma-separated list of cell, world, conservative.
     #[arg(long, value_name = "LIST", default_value = "all", help_heading = "Run")]
     pub modes: String,
 
-    /// Virtual-executor schedule seeds per mode (seeds 0..K).
-    #[arg(long, value_name = "K", default_value_t = 8, help_heading = "Run")]
+    /// Virtual-executor schedule seeds per mode (seeds FIRST..FIRST+K; `--schedules 0
+    /// --repeats 0` is an error, nothing to check).
+    #[arg(long, value_name = "K", default_value_t = 8, help_heading = "Run",
+          value_parser = whole(0, u64::MAX))]
     pub schedules: u64,
 
+    /// The first schedule seed (a long soak continues where the last one stopped).
+    #[arg(long, value_name = "FIRST", default_value_t = 0, help_heading = "Run",
+          value_parser = whole(0, u64::MAX))]
+    pub first_schedule: u64,
+
     /// Threaded runs per mode.
-    #[arg(long, value_name = "R", default_value_t = 3, help_heading = "Run")]
+    #[arg(long, value_name = "R", default_value_t = 3, help_heading = "Run",
+          value_parser = whole(0, u64::MAX))]
     pub repeats: u64,
 
     /// Optimism window.
     #[arg(long, value_name = "W", default_value_t = 16, help_heading = "Run",
-          value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+          value_parser = whole(1, 1_000_000))]
     pub window: u64,
 
     /// How cells are assigned to worlds.
     #[arg(long, value_enum, default_value = "blocks", help_heading = "Run")]
     pub partition: PartitionArg,
+
+    /// Seed of the kmeans and random partitioners [default: 0]. With --partition kmeans or
+    /// random only.
+    #[arg(long, value_name = "S", help_heading = "Run", value_parser = whole(0, u64::MAX))]
+    pub partition_seed: Option<u64>,
 
     /// Ghost policy of the optimistic modes (see `soda run --help`).
     #[arg(long, value_enum, default_value = "delta", help_heading = "Run")]
@@ -98,10 +118,23 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     }
     let (scene, origin) = scene_args.load()?;
     let modes = parse_modes(&args.modes)?;
+    if args.schedules == 0 && args.repeats == 0 {
+        bail!(
+            "--schedules 0 and --repeats 0 leave no run to check: give at least one schedule \
+             (--schedules K) or threaded run (--repeats R)"
+        );
+    }
+    if args.partition_seed.is_some() && args.partition == PartitionArg::Blocks {
+        bail!(
+            "--partition-seed seeds the kmeans and random partitioners, and blocks has \
+             nothing random: add `--partition kmeans` or `--partition random`, or drop it"
+        );
+    }
     let threads = args.threads.map_or_else(default_threads, |t| t as usize);
     let mut checks = Vec::new();
     for &mode in &modes {
-        for seed in 0..args.schedules {
+        let first = args.first_schedule;
+        for seed in first..first.saturating_add(args.schedules) {
             checks.push(Check {
                 executor: ExecutorKind::Virtual,
                 mode,
@@ -127,12 +160,12 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     .context("the reference run failed")?;
     let expected = Arc::new(expected);
     let out = format!(
-        "verify           {} ({origin}), {} steps, {} worlds ({:?} partition), window {}, {} thread{}\n\
+        "verify           {} ({origin}), {} steps, {} worlds ({} partition), window {}, {} thread{}\n\
          reference        hash {}\n",
         scene.name,
         args.steps,
         args.worlds,
-        PartitionKind::from(args.partition),
+        PartitionKind::from(args.partition).name(),
         args.window,
         threads,
         if threads == 1 { "" } else { "s" },
@@ -180,6 +213,7 @@ fn run_check(
         .mode(check.mode)
         .window(args.window)
         .partition(args.partition.into())
+        .partition_seed(args.partition_seed.unwrap_or(0))
         .schedule(ScheduleSpec::Seeded(check.seed.unwrap_or(0)))
         .ghosts(args.ghosts.into())
         .record_schedule(false);
@@ -289,6 +323,9 @@ fn reproduce(
         args.window,
         PartitionKind::from(args.partition).name()
     );
+    if let Some(s) = args.partition_seed {
+        cmd += &format!(" --partition-seed {s}");
+    }
     if args.ghosts == GhostsArg::Full {
         cmd += " --ghosts full";
     }

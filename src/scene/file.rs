@@ -70,7 +70,7 @@ pub fn parse_scene(text: &str, format: SceneFormat, origin: &str) -> Result<Scen
         })?,
         SceneFormat::Json => serde_json::from_str(text).map_err(|e| SceneError::Parse {
             origin: origin.to_string(),
-            message: json_message(&e),
+            message: json_message(&e, text),
         })?,
     };
     validate(&scene, origin)?;
@@ -103,14 +103,23 @@ fn toml_message(e: &toml::de::Error, text: &str) -> String {
     format!("line {line}, column {column}: {message}\n  |\n{line:>3} | {source}")
 }
 
-/// The JSON parser's message, which already ends with the line and column.
-fn json_message(e: &serde_json::Error) -> String {
+/// The JSON parser's message, which already ends with the line and column; a syntax error
+/// on a line holding `NaN` or `Infinity` (not JSON, which has finite numbers only) says so.
+fn json_message(e: &serde_json::Error, text: &str) -> String {
     let kind = match e.classify() {
         serde_json::error::Category::Syntax => "syntax error: ",
         serde_json::error::Category::Eof => "unexpected end of file: ",
         _ => "",
     };
-    format!("{kind}{e}")
+    let line = text.lines().nth(e.line().saturating_sub(1)).unwrap_or("");
+    let not_json = ["NaN", "Infinity"].into_iter().find(|w| line.contains(w));
+    match not_json {
+        Some(word) if e.classify() == serde_json::error::Category::Syntax => format!(
+            "{kind}{e}: `{word}` is not a JSON number (JSON has no NaN or Infinity); every \
+             number in a scene must be finite"
+        ),
+        _ => format!("{kind}{e}"),
+    }
 }
 
 /// Reads, parses and validates a scene file; the extension (`.toml` or `.json`) picks the

@@ -190,7 +190,7 @@ fn write_profile(p: &Profile, w: &PeakWindow, svg: &Path, title: &str) -> Result
         cpu.push((t as f64, rt));
     }
     let csv = svg.with_file_name("peak-resistance-cost.csv");
-    std::fs::write(&csv, text).with_context(|| format!("cannot write {}", csv.display()))?;
+    super::super::atomic::write(&csv, text.as_bytes())?;
     let chart = svg.with_file_name("peak-resistance-cost.svg");
     charts::line_chart(
         &chart,
@@ -378,8 +378,7 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         ));
     }
     let model_path = svg.with_file_name("peak-resistance-model.csv");
-    std::fs::write(&model_path, model_csv)
-        .with_context(|| format!("cannot write {}", model_path.display()))?;
+    super::super::atomic::write(&model_path, model_csv.as_bytes())?;
     println!("wrote {}", model_path.display());
     let series = |values: &[Vec<Vec<f64>>], what: &str| -> Vec<(String, Vec<(f64, f64)>)> {
         world_counts
