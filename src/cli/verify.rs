@@ -7,16 +7,13 @@ use super::exec_args::{default_threads, GhostsArg, ModeArg, PartitionArg, Plante
 use super::numbers::whole;
 use super::output::print;
 use super::source::SceneArgs;
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
-use soda::divergence::{first_difference, Divergence};
-use soda::frame::StatesWanted;
-use soda::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec};
+use soda::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode};
 use soda::scene::SceneFormat;
-use soda::sim::{run_scene, ExecutorKind, RunOptions};
-use soda::{Body, RigidBodyModel, Scene};
+use soda::sim::ExecutorKind;
+use soda::verify::{verify_with_progress, RunOutcome, VerifyOptions, VerifySetup};
 use std::path::Path;
-use std::sync::Arc;
 
 /// Examples shown after `soda verify --help`.
 pub const AFTER_HELP: &str = "\
@@ -102,14 +99,14 @@ pub struct VerifyArgs {
 /// The default body count of a built-in scene under `verify` (small enough for a minute).
 const VERIFY_OBJECTS: usize = 125;
 
-/// One executor run to compare with the reference.
+/// One executor run to compare with the reference (for the reproduce command).
 struct Check {
     executor: ExecutorKind,
     mode: RollbackMode,
     seed: Option<u64>,
 }
 
-/// Runs the command.
+/// Runs the command: a wrapper over the library's [`soda::verify`] for a scene.
 pub fn verify(args: &VerifyArgs) -> Result<()> {
     let mut scene_args = args.scene.clone();
     let builtin = SceneFormat::from_path(Path::new(&scene_args.scene)).is_none();
@@ -131,37 +128,25 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         );
     }
     let threads = args.threads.map_or_else(default_threads, |t| t as usize);
-    let mut checks = Vec::new();
-    for &mode in &modes {
-        let first = args.first_schedule;
-        for seed in first..first.saturating_add(args.schedules) {
-            checks.push(Check {
-                executor: ExecutorKind::Virtual,
-                mode,
-                seed: Some(seed),
-            });
-        }
-        for _ in 0..args.repeats {
-            checks.push(Check {
-                executor: ExecutorKind::Threaded,
-                mode,
-                seed: None,
-            });
-        }
-    }
-    let mut expected = Vec::with_capacity(args.steps as usize);
-    let reference = run_scene(
-        &scene,
-        &RunOptions::default(),
-        args.steps,
-        &StatesWanted::none(),
-        |f, _| expected.push(f.hash),
-    )
-    .context("the reference run failed")?;
-    let expected = Arc::new(expected);
-    let out = format!(
-        "verify           {} ({origin}), {} steps, {} worlds ({} partition), window {}, {} thread{}\n\
-         reference        hash {}\n",
+    let mut kernel = KernelConfig::new(args.worlds as usize)
+        .window(args.window)
+        .partition(args.partition.into())
+        .partition_seed(args.partition_seed.unwrap_or(0))
+        .ghosts(args.ghosts.into());
+    kernel.planted_bug = args.planted_bug.map_or(PlantedBug::None, Into::into);
+    let options = VerifyOptions {
+        steps: args.steps,
+        kernel,
+        modes: modes.clone(),
+        first_schedule: args.first_schedule,
+        schedules: args.schedules,
+        repeats: args.repeats,
+        threads,
+        check_contract: true,
+    };
+    let setup = VerifySetup::new(scene.model(), scene.grid(), scene.initial_bodies());
+    print(&format!(
+        "verify           {} ({origin}), {} steps, {} worlds ({} partition), window {}, {} thread{}\n",
         scene.name,
         args.steps,
         args.worlds,
@@ -169,135 +154,60 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         args.window,
         threads,
         if threads == 1 { "" } else { "s" },
-        reference.hash
-    );
-    print(&out)?;
-    let progress = super::output::runs_bar(checks.len() as u64);
-    let mut diverged = 0;
-    for check in &checks {
-        let line = run_check(args, &scene, &scene_args, check, threads, &expected);
+    ))?;
+    let runs = modes.len() as u64 * (args.schedules + args.repeats);
+    let progress = super::output::runs_bar(runs);
+    let mut printed = Ok(());
+    let report = verify_with_progress(&setup, &options, |check| {
         progress.inc(1);
-        let text = match line {
-            Ok(text) => text,
-            Err(text) => {
-                diverged += 1;
-                text
-            }
-        };
-        progress.suspend(|| print(&text))?;
-    }
+        let mut text = format!("{check}\n");
+        if !check.matched() {
+            let step = match &check.outcome {
+                RunOutcome::Diverged(m) => m.step,
+                _ => args.steps,
+            };
+            let c = Check {
+                executor: check.executor,
+                mode: check.mode,
+                seed: check.schedule_seed,
+            };
+            text += &format!(
+                "         reproduce: {}\n",
+                reproduce(args, &scene_args, &c, step, threads)
+            );
+        }
+        if printed.is_ok() {
+            printed = progress.suspend(|| print(&text));
+        }
+    });
     progress.finish_and_clear();
-    if diverged > 0 {
+    printed?;
+    print(&format!(
+        "reference        hash {}\n",
+        report.reference_hash()
+    ))?;
+    if let Some(e) = &report.reference_error {
+        bail!("the reference run failed: {e}");
+    }
+    let diagnosis = report.diagnosis();
+    for d in &diagnosis {
+        print(&format!("diagnosis: {d}\n"))?;
+    }
+    let failed = report.failures().count();
+    if failed > 0 {
         bail!(
-            "{diverged} of {} runs diverged from the reference (see the lines marked DIVERGED)",
-            checks.len()
+            "{failed} of {} runs diverged from the reference (see the lines marked DIVERGED)",
+            report.runs.len()
         );
+    }
+    if !diagnosis.is_empty() {
+        bail!("the model broke its contract (see the diagnosis above)");
     }
     print(&format!(
         "all {} runs committed the reference's {} hashes\n",
-        checks.len(),
+        report.runs.len(),
         args.steps
     ))
-}
-
-/// Runs one check: `Ok(line)` if every committed hash matched, `Err(report)` otherwise.
-fn run_check(
-    args: &VerifyArgs,
-    scene: &Scene,
-    scene_args: &SceneArgs,
-    check: &Check,
-    threads: usize,
-    expected: &Arc<Vec<u64>>,
-) -> std::result::Result<String, String> {
-    let mut kernel = KernelConfig::new(args.worlds as usize)
-        .mode(check.mode)
-        .window(args.window)
-        .partition(args.partition.into())
-        .partition_seed(args.partition_seed.unwrap_or(0))
-        .schedule(ScheduleSpec::Seeded(check.seed.unwrap_or(0)))
-        .ghosts(args.ghosts.into())
-        .record_schedule(false);
-    kernel.planted_bug = args.planted_bug.map_or(PlantedBug::None, Into::into);
-    let options = RunOptions {
-        executor: check.executor,
-        kernel,
-        threads,
-    };
-    let wanted = StatesWanted {
-        unexpected: Some(expected.clone()),
-        ..StatesWanted::none()
-    };
-    let mut first_bad: Option<(u64, Vec<Body>)> = None;
-    let mut committed = 0u64;
-    let name = match check.seed {
-        Some(seed) => format!(
-            "{:<9}{:<13} schedule-seed {seed}",
-            check.executor.name(),
-            check.mode.name()
-        ),
-        None => format!(
-            "{:<9}{:<13} {threads} threads",
-            check.executor.name(),
-            check.mode.name()
-        ),
-    };
-    let result = run_scene(scene, &options, args.steps, &wanted, |f, states| {
-        committed += 1;
-        if first_bad.is_none() && expected.get(f.step as usize - 1) != Some(&f.hash) {
-            let bodies = states.map(|s| s.iter().map(|b| (*b).clone()).collect());
-            first_bad = Some((f.step, bodies.unwrap_or_default()));
-        }
-    });
-    let report = match result {
-        Ok(r) => r,
-        Err(e) => return Err(format!("DIVERGED {name}: the run failed: {e}\n")),
-    };
-    let Some((step, bodies)) = first_bad else {
-        let k = report.kernel.as_ref().map(|k| {
-            format!(
-                ", {} rollbacks, efficiency {:.3}",
-                k.counters.total.rollbacks(),
-                k.efficiency
-            )
-        });
-        return Ok(format!(
-            "ok       {name}: {committed} steps match{}\n",
-            k.unwrap_or_default()
-        ));
-    };
-    let divergence = locate(scene, step, &bodies);
-    let what = match &divergence {
-        Some(d) => format!("first divergence at {d}"),
-        None => format!(
-            "step {step}: the hash differs but every body's fields are equal (a hashing bug)"
-        ),
-    };
-    Err(format!(
-        "DIVERGED {name}: {what}\n         reproduce: {}\n",
-        reproduce(args, scene_args, check, step, threads)
-    ))
-}
-
-/// The first difference between the reference's state at `step` and `got`.
-fn locate(scene: &Scene, step: u64, got: &[Body]) -> Option<Divergence> {
-    let mut reference: Vec<Body> = Vec::new();
-    let found = run_scene(
-        scene,
-        &RunOptions::default(),
-        step,
-        &StatesWanted::at(step),
-        |f, s| {
-            if f.step == step {
-                reference = s
-                    .map(|s| s.iter().map(|b| (*b).clone()).collect())
-                    .unwrap_or_default();
-            }
-        },
-    );
-    found.ok()?;
-    let e: Vec<&Body> = reference.iter().collect();
-    let g: Vec<&Body> = got.iter().collect();
-    first_difference::<RigidBodyModel>(step, &scene.grid(), &e, &g)
 }
 
 /// The `soda run` command that reruns the diverging configuration up to `step`.

@@ -57,7 +57,9 @@ pub struct VerifyOptions {
     pub kernel: KernelConfig,
     /// Rollback modes to check.
     pub modes: Vec<RollbackMode>,
-    /// Virtual-executor schedule seeds per mode (seeds `0..schedules`).
+    /// The first virtual-executor schedule seed.
+    pub first_schedule: u64,
+    /// Virtual-executor schedule seeds per mode (seeds `first_schedule..` onwards).
     pub schedules: u64,
     /// Threaded runs per mode.
     pub repeats: u64,
@@ -81,6 +83,7 @@ impl Default for VerifyOptions {
                 RollbackMode::World,
                 RollbackMode::Conservative,
             ],
+            first_schedule: 0,
             schedules: 8,
             repeats: 3,
             threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
@@ -130,7 +133,8 @@ pub fn verify_with_progress<M: CellModel + Clone + 'static>(
     }
     for &mode in &options.modes {
         let kernel = options.kernel.clone().mode(mode);
-        for seed in 0..options.schedules {
+        let first = options.first_schedule;
+        for seed in first..first.saturating_add(options.schedules) {
             let run = RunOptions::virtual_exec(
                 kernel
                     .clone()
