@@ -30,7 +30,8 @@ The summary's last line is `hash` and the final state hash (16 hex digits): two 
 the same scene and options always print the same hash.
 
 Every output path is checked before step 1. Files are written under a temporary name
-and renamed into place, so each is the old file or a whole new one. Ctrl-C stops at the
+and renamed into place, so each is the old file or a whole new one (--csv appends its row
+under a lock and cuts the table back if the append fails). Ctrl-C stops at the
 next committed step, keeps the --record file (whole frames so far), prints
 `interrupted at step N, hash H` and exits with 130.";
 
