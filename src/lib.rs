@@ -82,6 +82,8 @@
 
 #![warn(missing_docs)]
 
+#[cfg(feature = "cli")]
+pub mod app;
 pub mod divergence;
 pub mod exec;
 pub mod frame;

@@ -917,3 +917,80 @@ fn every_planted_bug_fires_on_its_documented_command() {
         reproduces_a_divergence(&out, &["--scene", "sparse-gas", "--objects", "125"]);
     }
 }
+
+/// `--model NAME` runs a registered example model on every executor with the same hash;
+/// `verify` and the granularity experiment work for it too; `models` lists them.
+#[test]
+fn example_models_run_verify_and_experiment_from_the_cli() {
+    let hash = |out: &str| {
+        out.lines()
+            .find_map(|l| l.strip_prefix("hash"))
+            .map(|h| h.trim().to_string())
+            .expect("a hash line")
+    };
+    let base = [
+        "run",
+        "--model",
+        "epidemic",
+        "--entities",
+        "400",
+        "--steps",
+        "40",
+    ];
+    let reference = hash(&ok(&base));
+    for extra in [
+        &["--executor", "virtual", "--worlds", "6"][..],
+        &["--executor", "threaded", "--worlds", "6", "--threads", "2"][..],
+        &[
+            "--executor",
+            "threaded",
+            "--mode",
+            "conservative",
+            "--threads",
+            "2",
+        ][..],
+    ] {
+        let args: Vec<&str> = base.iter().copied().chain(extra.iter().copied()).collect();
+        assert_eq!(hash(&ok(&args)), reference, "{extra:?}");
+    }
+    let out = ok(&[
+        "verify",
+        "--model",
+        "phold",
+        "--entities",
+        "500",
+        "--steps",
+        "15",
+        "--schedules",
+        "2",
+        "--repeats",
+        "1",
+        "--threads",
+        "2",
+    ]);
+    assert!(out.contains("all 9 runs committed"), "{out}");
+    let out = ok(&[
+        "experiment",
+        "granularity",
+        "--model",
+        "phold",
+        "--entities",
+        "400",
+        "--windows",
+        "4",
+        "--seeds",
+        "1",
+        "--steps",
+        "20",
+    ]);
+    assert_eq!(out.lines().count(), 4, "{out}");
+    let out = ok(&["models"]);
+    for name in ["rigid-bodies", "epidemic", "phold"] {
+        assert!(out.contains(name), "{out}");
+    }
+    let err = fails(&["run", "--model", "nope"]);
+    assert!(
+        err.contains("no such model") && err.contains("epidemic"),
+        "{err}"
+    );
+}

@@ -65,21 +65,64 @@ enum Command {
     #[command(after_help = plot::AFTER_HELP)]
     Plot(plot::PlotArgs),
     /// Run one of the thesis's §4.2 experiments and write its data (CSV) and a chart (SVG).
+    ///
+    /// For the other models: `soda experiment granularity --model NAME [--windows 4,16,64]`.
     #[command(after_help = experiment::AFTER_HELP)]
     Experiment(experiment::ExperimentArgs),
+    /// List the models `--model` takes: the rigid bodies of the scenes, and the example
+    /// models (`soda run --model epidemic`, `soda verify --model phold`).
+    Models,
+}
+
+/// The name of the rigid-body model, whose runs take scenes.
+pub const RIGID_BODIES: &str = "rigid-bodies";
+
+/// The value of `--model NAME` or `--model=NAME`, if given.
+fn model_arg(args: &[std::ffi::OsString]) -> Option<String> {
+    args.iter().enumerate().find_map(|(i, a)| {
+        let a = a.to_str()?;
+        if a == "--model" {
+            args.get(i + 1).map(|v| v.to_string_lossy().into_owned())
+        } else {
+            a.strip_prefix("--model=").map(str::to_string)
+        }
+    })
 }
 
 /// Parses the command line, runs the command and turns any error into a message on stderr
 /// and exit status 1 (usage errors exit with clap's status 2).
 pub fn main() -> ExitCode {
-    let cli = Cli::parse_from(help_help(std::env::args_os().collect()));
-    let result = match cli.command {
+    let args = help_help(std::env::args_os().collect());
+    // Another model than rigid bodies: the generic command line over the example models.
+    let result = match model_arg(&args) {
+        Some(m) if m != RIGID_BODIES => soda::app::run_with(&soda::app::Registry::examples(), args),
+        _ => run_rigid(Cli::parse_from(args)),
+    };
+    report(result)
+}
+
+/// Runs a command of the rigid-body command line.
+fn run_rigid(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
         Command::Run(args) => run::run(&args),
         Command::Scenes(args) => scenes::scenes(&args),
         Command::Verify(args) => verify::verify(&args),
         Command::Plot(args) => plot::plot(&args),
         Command::Experiment(args) => experiment::experiment(&args),
-    };
+        Command::Models => {
+            println!(
+                "{RIGID_BODIES:<16} rigid bodies of a scene (--scene, --objects): the default"
+            );
+            for m in soda::app::Registry::examples().models() {
+                println!("{:<16} {}", m.name(), m.about());
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Turns a command's result into an exit status, printing an error and its causes.
+fn report(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) if output::is_broken_pipe(&e) => ExitCode::SUCCESS,

@@ -41,6 +41,11 @@ pub struct RunArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
 
+    /// The model: `rigid-bodies` (the scenes) or a registered example model (`soda models`:
+    /// epidemic, phold), which takes --entities, --seed, --steps and the kernel options.
+    #[arg(long, value_name = "NAME", default_value = super::RIGID_BODIES)]
+    pub model: String,
+
     /// Number of steps to compute (600 steps of 1/60 s = 10 simulated seconds).
     #[arg(long, value_name = "N", default_value_t = 600, help_heading = "Run",
           value_parser = super::numbers::whole(0, u64::MAX))]

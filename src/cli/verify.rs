@@ -38,6 +38,11 @@ pub struct VerifyArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
 
+    /// The model: `rigid-bodies` (the scenes) or a registered example model (`soda models`:
+    /// epidemic, phold), which takes --entities, --seed, --steps and the kernel options.
+    #[arg(long, value_name = "NAME", default_value = super::RIGID_BODIES)]
+    pub model: String,
+
     /// Committed steps to compare per run.
     #[arg(long, value_name = "N", default_value_t = 60, help_heading = "Run",
           value_parser = whole(1, u64::MAX))]

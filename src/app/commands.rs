@@ -1,0 +1,165 @@
+//! The commands every registered model gets: run, verify, and the rollback-granularity
+//! experiment. They print to stdout and return `anyhow` errors naming the fix.
+
+use super::registry::{ModelSize, RegisteredModel};
+use crate::kernel::{KernelConfig, RollbackMode, ScheduleSpec};
+use crate::sim::{ModelReport, RunOptions};
+use crate::verify::{RunOutcome, VerifyOptions};
+use anyhow::{bail, Result};
+
+/// `run --model NAME`: runs the model and prints a summary ending with its hash (or the
+/// report as JSON).
+pub fn run(
+    model: &dyn RegisteredModel,
+    size: &ModelSize,
+    options: &RunOptions,
+    steps: u64,
+    json: bool,
+) -> Result<ModelReport> {
+    let report = model.run(size, options, steps)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(report);
+    }
+    println!("model            {} ({})", model.name(), model.about());
+    println!(
+        "executor         {}{}",
+        report.executor,
+        report.kernel.as_ref().map_or(String::new(), |k| format!(
+            ", {} worlds, {} threads, mode {}, window {}",
+            k.worlds,
+            k.threads,
+            k.mode.name(),
+            k.window
+        ))
+    );
+    println!(
+        "steps            {}  ({:.3} s, {:.0} steps/s, {:.0} entity-steps/s)",
+        report.steps, report.wall_seconds, report.steps_per_second, report.entity_steps_per_second
+    );
+    println!("entities         {}", report.entities);
+    let events: Vec<String> = report
+        .events
+        .iter()
+        .map(|(k, v)| format!("{k} {v}"))
+        .collect();
+    println!(
+        "events           {}",
+        if events.is_empty() {
+            "none".to_string()
+        } else {
+            events.join(", ")
+        }
+    );
+    if let Some(k) = &report.kernel {
+        println!(
+            "kernel           {} rollbacks, efficiency {:.3}, {} cells re-executed, {} messages",
+            k.counters.total.rollbacks(),
+            k.efficiency,
+            k.counters.total.cells_recomputed,
+            k.counters.total.messages_sent + k.counters.total.anti_messages_sent
+        );
+    }
+    println!("hash             {}", report.hash);
+    Ok(report)
+}
+
+/// `verify --model NAME`: every check of `options`, one line per run, the diagnosis; an
+/// error if anything diverged or the model broke its contract.
+pub fn verify(
+    model: &dyn RegisteredModel,
+    size: &ModelSize,
+    options: &VerifyOptions,
+) -> Result<()> {
+    println!(
+        "verify           {} ({}), {} steps, {} worlds, window {}, {} threads",
+        model.name(),
+        model.about(),
+        options.steps,
+        options.kernel.worlds,
+        options.kernel.window,
+        options.threads
+    );
+    let report = model.verify(size, options, &mut |check| {
+        println!("{check}");
+        if let (RunOutcome::Diverged(_), Some(replay)) = (&check.outcome, &check.replay) {
+            println!("         replay schedule: {replay}");
+        }
+    });
+    println!("reference        hash {}", report.reference_hash());
+    let diagnosis = report.diagnosis();
+    for d in &diagnosis {
+        println!("diagnosis: {d}");
+    }
+    if !report.passed() {
+        bail!(
+            "{} of {} runs diverged or the model broke its contract (see above)",
+            report.failures().count(),
+            report.runs.len()
+        );
+    }
+    println!(
+        "all {} runs committed the reference's {} hashes",
+        report.runs.len(),
+        options.steps
+    );
+    Ok(())
+}
+
+/// `experiment granularity --model NAME`: cell against world rollback (and conservative as
+/// the baseline) on the virtual executor under seeded schedules, per optimism window: the
+/// cell-steps each re-executes and the efficiency, averaged over `seeds` schedules. Prints a
+/// CSV table.
+pub fn granularity(
+    model: &dyn RegisteredModel,
+    size: &ModelSize,
+    kernel: &KernelConfig,
+    windows: &[u64],
+    seeds: u64,
+    steps: u64,
+) -> Result<()> {
+    if windows.is_empty() || seeds == 0 {
+        bail!("give at least one window (--windows 4,16) and one schedule (--seeds 1 or more)");
+    }
+    println!(
+        "model,mode,window,seeds,steps,cells_computed,cells_recomputed,rollbacks,efficiency,hash"
+    );
+    for &window in windows {
+        for mode in [
+            RollbackMode::Cell,
+            RollbackMode::World,
+            RollbackMode::Conservative,
+        ] {
+            let (mut computed, mut recomputed, mut rollbacks, mut eff) = (0u64, 0u64, 0u64, 0.0);
+            let mut hash = String::new();
+            for seed in 0..seeds {
+                let options = RunOptions::virtual_exec(
+                    kernel
+                        .clone()
+                        .mode(mode)
+                        .window(window)
+                        .schedule(ScheduleSpec::Seeded(seed))
+                        .record_schedule(false),
+                );
+                let r = model.run(size, &options, steps)?;
+                let k = r.kernel.expect("a virtual run has kernel counters");
+                computed += k.counters.total.cells_computed;
+                recomputed += k.counters.total.cells_recomputed;
+                rollbacks += k.counters.total.rollbacks();
+                eff += k.efficiency;
+                hash = r.hash;
+            }
+            let n = seeds as f64;
+            println!(
+                "{},{},{window},{seeds},{steps},{:.1},{:.1},{:.1},{:.4},{hash}",
+                model.name(),
+                mode.name(),
+                computed as f64 / n,
+                recomputed as f64 / n,
+                rollbacks as f64 / n,
+                eff / n
+            );
+        }
+    }
+    Ok(())
+}

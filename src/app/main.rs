@@ -1,0 +1,271 @@
+//! The command line of [`main_with`]: parsing (clap) and dispatch to [`super::commands`].
+
+use super::commands;
+use super::registry::{ModelSize, Registry};
+use crate::kernel::{KernelConfig, PartitionKind, RollbackMode};
+use crate::sim::{ExecutorKind, RunOptions};
+use crate::verify::VerifyOptions;
+use anyhow::{anyhow, bail, Result};
+use clap::{Args, Parser, Subcommand};
+use std::process::ExitCode;
+
+/// A simulation built on SODA: deterministic optimistic (Time Warp) parallel runs of the
+/// registered models, bit-identical on every executor.
+#[derive(Debug, Parser)]
+#[command(arg_required_else_help = true)]
+pub struct ModelCli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// List the registered models.
+    Models,
+    /// Run a model on an executor and print a summary ending with the final hash.
+    Run(RunArgs),
+    /// Check that the virtual and threaded executors commit the reference's bits, with the
+    /// contract checker and a diagnosis.
+    Verify(VerifyArgs),
+    /// Rollback granularity: cell against world rollback per optimism window (CSV).
+    Experiment(ExperimentArgs),
+}
+
+/// Which model, its size and seed.
+#[derive(Debug, Args, Clone)]
+pub struct ModelArgs {
+    /// The registered model (see `models`).
+    #[arg(long, value_name = "NAME")]
+    pub model: String,
+    /// Entities at step 0 [default: the model's].
+    #[arg(long, value_name = "N")]
+    pub entities: Option<usize>,
+    /// Seed of the initial states and the model's randomness.
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// The kernel's options.
+#[derive(Debug, Args, Clone)]
+pub struct KernelArgs {
+    /// Worlds.
+    #[arg(long, value_name = "N", default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..=4096))]
+    pub worlds: u64,
+    /// Optimism window.
+    #[arg(long, value_name = "W", default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub window: u64,
+    /// Partitioner: blocks, kmeans or random.
+    #[arg(long, value_name = "P", default_value = "blocks")]
+    pub partition: String,
+}
+
+impl KernelArgs {
+    fn config(&self) -> Result<KernelConfig> {
+        let partition = PartitionKind::parse(&self.partition).ok_or_else(|| {
+            anyhow!(
+                "--partition {}: use blocks, kmeans or random",
+                self.partition
+            )
+        })?;
+        Ok(KernelConfig::new(self.worlds as usize)
+            .window(self.window)
+            .partition(partition))
+    }
+}
+
+#[derive(Debug, Args)]
+struct RunArgs {
+    #[command(flatten)]
+    model: ModelArgs,
+    /// Steps to run.
+    #[arg(long, value_name = "N", default_value_t = 300)]
+    steps: u64,
+    /// Executor: reference, virtual or threaded.
+    #[arg(long, value_name = "E", default_value = "reference")]
+    executor: String,
+    /// Rollback mode: cell, world or conservative.
+    #[arg(long, value_name = "M", default_value = "cell")]
+    mode: String,
+    /// Threads of the threaded executor [default: the available cores].
+    #[arg(long, value_name = "T")]
+    threads: Option<usize>,
+    #[command(flatten)]
+    kernel: KernelArgs,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Debug, Args)]
+struct VerifyArgs {
+    #[command(flatten)]
+    model: ModelArgs,
+    /// Steps compared per run.
+    #[arg(long, value_name = "N", default_value_t = 60)]
+    steps: u64,
+    /// Modes: all, or a comma-separated list of cell, world, conservative.
+    #[arg(long, value_name = "LIST", default_value = "all")]
+    modes: String,
+    /// Virtual-executor schedule seeds per mode.
+    #[arg(long, value_name = "K", default_value_t = 8)]
+    schedules: u64,
+    /// Threaded runs per mode.
+    #[arg(long, value_name = "R", default_value_t = 3)]
+    repeats: u64,
+    /// Threads of the threaded runs [default: the available cores].
+    #[arg(long, value_name = "T")]
+    threads: Option<usize>,
+    #[command(flatten)]
+    kernel: KernelArgs,
+}
+
+#[derive(Debug, Args)]
+struct ExperimentArgs {
+    /// The experiment: `granularity`.
+    #[arg(value_name = "EXPERIMENT")]
+    name: String,
+    #[command(flatten)]
+    model: ModelArgs,
+    /// Optimism windows, comma-separated.
+    #[arg(long, value_name = "LIST", default_value = "4,16,64")]
+    windows: String,
+    /// Schedule seeds averaged per point.
+    #[arg(long, value_name = "K", default_value_t = 3)]
+    seeds: u64,
+    /// Steps per run.
+    #[arg(long, value_name = "N", default_value_t = 100)]
+    steps: u64,
+    #[command(flatten)]
+    kernel: KernelArgs,
+}
+
+fn threads(t: Option<usize>) -> usize {
+    t.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()))
+        .max(1)
+}
+
+/// Parses a rollback mode name.
+pub(crate) fn parse_mode(s: &str) -> Result<RollbackMode> {
+    match s.trim() {
+        "cell" => Ok(RollbackMode::Cell),
+        "world" => Ok(RollbackMode::World),
+        "conservative" => Ok(RollbackMode::Conservative),
+        other => bail!("`{other}` is not a rollback mode: use cell, world or conservative"),
+    }
+}
+
+fn model<'a>(
+    registry: &'a Registry,
+    args: &ModelArgs,
+) -> Result<(&'a dyn super::RegisteredModel, ModelSize)> {
+    let m = registry.get(&args.model).ok_or_else(|| {
+        let names: Vec<&str> = registry.models().map(|m| m.name()).collect();
+        anyhow!(
+            "--model {}: no such model; registered: {}",
+            args.model,
+            names.join(", ")
+        )
+    })?;
+    Ok((
+        m,
+        ModelSize {
+            entities: args.entities,
+            seed: args.seed,
+        },
+    ))
+}
+
+fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
+    match cli.command {
+        Command::Models => {
+            for m in registry.models() {
+                println!("{:<16} {}", m.name(), m.about());
+            }
+            Ok(())
+        }
+        Command::Run(a) => {
+            let (m, size) = model(registry, &a.model)?;
+            let executor: ExecutorKind = a.executor.parse()?;
+            let options = RunOptions {
+                executor,
+                kernel: a.kernel.config()?.mode(parse_mode(&a.mode)?),
+                threads: threads(a.threads),
+            };
+            commands::run(m, &size, &options, a.steps, a.json).map(|_| ())
+        }
+        Command::Verify(a) => {
+            let (m, size) = model(registry, &a.model)?;
+            let options = VerifyOptions {
+                steps: a.steps,
+                kernel: a.kernel.config()?,
+                modes: parse_modes(&a.modes)?,
+                schedules: a.schedules,
+                repeats: a.repeats,
+                threads: threads(a.threads),
+                ..VerifyOptions::default()
+            };
+            commands::verify(m, &size, &options)
+        }
+        Command::Experiment(a) => {
+            if a.name != "granularity" {
+                bail!(
+                    "experiment `{}`: the experiment for any model is `granularity`",
+                    a.name
+                );
+            }
+            let (m, size) = model(registry, &a.model)?;
+            let windows = a
+                .windows
+                .split(',')
+                .map(|w| {
+                    w.trim()
+                        .parse::<u64>()
+                        .ok()
+                        .filter(|&w| w >= 1)
+                        .ok_or_else(|| {
+                            anyhow!(
+                                "--windows {}: `{w}` is not a window of 1 or more",
+                                a.windows
+                            )
+                        })
+                })
+                .collect::<Result<Vec<u64>>>()?;
+            commands::granularity(m, &size, &a.kernel.config()?, &windows, a.seeds, a.steps)
+        }
+    }
+}
+
+/// Parses `all` or a comma-separated list of rollback modes.
+pub(crate) fn parse_modes(s: &str) -> Result<Vec<RollbackMode>> {
+    if s == "all" {
+        return Ok(vec![
+            RollbackMode::Cell,
+            RollbackMode::World,
+            RollbackMode::Conservative,
+        ]);
+    }
+    s.split(',').map(parse_mode).collect()
+}
+
+/// The command line for the models of `registry`: parses the process's arguments, runs the
+/// command, prints any error with its cause and returns exit status 1 (2 for usage errors).
+pub fn main_with(registry: Registry) -> ExitCode {
+    let cli = ModelCli::parse();
+    match dispatch(&registry, cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Runs one parsed command line against `registry` (for a binary that has its own parser
+/// and hands `--model` commands over).
+pub fn run_with(
+    registry: &Registry,
+    args: impl IntoIterator<Item = std::ffi::OsString>,
+) -> Result<()> {
+    let cli = ModelCli::try_parse_from(args).map_err(|e| anyhow!("{e}"))?;
+    dispatch(registry, cli)
+}
