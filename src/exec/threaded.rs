@@ -71,7 +71,8 @@ pub struct ThreadTimes {
 /// The result of a threaded run.
 #[derive(Clone, Debug)]
 pub struct ThreadedReport<E> {
-    /// Committed frames in step order.
+    /// Committed frames in step order (empty when the setup did not keep them,
+    /// [`ThreadedSetup::keep_frames`]).
     pub frames: Vec<Frame<E>>,
     /// Kernel counters per world and in total.
     pub counters: Counters,
@@ -701,6 +702,7 @@ pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
             grid,
             initial,
             inputs: Vec::new(),
+            keep_frames: true,
         },
         config,
         threads,
@@ -721,6 +723,9 @@ pub struct ThreadedSetup<M: CellModel> {
     pub initial: Vec<M::State>,
     /// Inputs scheduled before the run starts.
     pub inputs: Vec<(Step, Input<M::State>)>,
+    /// Whether the report keeps every committed frame (`ThreadedReport::frames`; about 50
+    /// bytes per step, so a long run that hands frames to a sink should not).
+    pub keep_frames: bool,
 }
 
 /// [`run_threaded_with`] with scripted inputs, and a sink that also gets a [`RunControl`]
@@ -739,6 +744,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         grid,
         initial,
         inputs: scripted,
+        keep_frames,
     } = setup;
     let start = Instant::now();
     let threads = threads.max(1);
@@ -822,12 +828,14 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         shared.post_input(step, input)?;
     }
     let mut frames = Vec::new();
+    let mut delivered = 0u64;
     let mut stopped = false;
     let poster = shared.clone();
     let mut deliver = |batch: VecDeque<(Step, Partial<M>)>| {
         for (t, partial) in batch {
             let (frame, states) = finish_frame::<M>(t, partial, &wanted);
-            if frames.len() < steps as usize && !stopped {
+            if delivered < steps && !stopped {
+                delivered += 1;
                 let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
                 let mut post = |step: Step, input: Input<M::State>| poster.post_input(step, input);
                 let mut control = RunControl::new(poster.gvt.load(), &mut post);
@@ -837,7 +845,9 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
                     poster.stop.store(1);
                     poster.status.store(DONE);
                 }
-                frames.push(frame);
+                if keep_frames {
+                    frames.push(frame);
+                }
             }
         }
     };

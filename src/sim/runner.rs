@@ -182,6 +182,7 @@ impl<M: CellModel + 'static> Runner<M> {
                         grid,
                         initial,
                         inputs,
+                        keep_frames: false,
                     },
                     &options.kernel,
                     options.threads.max(1),
