@@ -6,11 +6,12 @@ mod contact;
 mod environment;
 pub mod metrics;
 mod model;
+mod pair;
 mod params;
 mod solver;
 
 pub use body::{Body, Material, Shape};
 pub use contact::{ContactPoint, ContactSet};
-pub use environment::{Environment, Plane, StaticCuboid};
+pub use environment::{DomainBox, Environment, Plane, StaticCuboid};
 pub use model::RigidBodyModel;
 pub use params::SolverParams;
