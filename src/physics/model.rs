@@ -213,6 +213,13 @@ impl RigidBodyModel {
         self.gravity.norm() * self.dt + self.params.max_separation_speed
     }
 
+    /// Whether a deferred impact is only projected (without gravity, SPEC.md §5.3): it keeps
+    /// its velocities, which only impulses change; under gravity it would gain `g·dt` of
+    /// approach per step while its position is held, so it is resolved with split masses.
+    fn matched(&self) -> bool {
+        self.gravity == Vec3::zeros()
+    }
+
     /// Approaches slower than this are plastic (restitution 0): two substeps of gravity.
     fn rest_speed(&self) -> f32 {
         2.0 * self.gravity.norm() * self.dt / self.params.substeps.max(1) as f32
@@ -529,15 +536,18 @@ impl CellModel for RigidBodyModel {
             let mut effect = PairEffect::default();
             let rest = self.rest_speed();
             for entry in &found.pairs {
-                // Impacts: resolved at full mass if first in both bodies' matching, else
-                // only projected; resting pairs: resolved with split masses.
+                // An impact first in both bodies' matching: full mass. A deferred impact:
+                // only projected without gravity, split masses with gravity. Resting
+                // pairs: split masses.
                 let (resolve, counts) = match entry.contact.edge(rest) {
                     None => (false, (1, 1)),
                     Some(edge) => {
                         let (mine, theirs, beaten) =
                             self.survey(own, entry, edge, &found.pairs, nb, &mut cache);
-                        if edge.impact {
-                            (!beaten, (1, 1))
+                        if edge.impact && !beaten {
+                            (true, (1, 1))
+                        } else if edge.impact && self.matched() {
+                            (false, (1, 1))
                         } else if own.id < entry.partner.id {
                             (true, (mine, theirs))
                         } else {

@@ -67,8 +67,8 @@ impl PairEffect {
 pub(crate) struct Edge {
     /// Time of impact, then the two ids: the order of the matching.
     pub key: (f32, u64, u64),
-    /// Whether the pair approaches faster than the resting speed (an impact, resolved by the
-    /// matching at full mass) rather than resting (resolved every step with split masses).
+    /// Whether the pair approaches faster than the resting speed (an impact, which takes
+    /// part in the matching) rather than resting (resolved in every step with split masses).
     pub impact: bool,
 }
 
@@ -356,9 +356,9 @@ impl PairContact {
             };
             depth = depth.max(-after);
         }
-        // Split like the impulses: body `x` moves `d·w_x / (n_a·w_a + n_b·w_b)`.
-        let split = counts.0 as f32 * a.inv_mass + counts.1 as f32 * b.inv_mass;
-        let share = |inv: f32| depth * (inv / split);
+        // Body `x` moves `d·w_x / (w_a + w_b)`: the whole overlap, unsplit (positions only;
+        // splitting it too left a ball pile under gravity sinking 0.17 m into itself).
+        let share = |inv: f32| depth * (inv / (a.inv_mass + b.inv_mass));
         if id == a.id {
             PairEffect {
                 dv: dva,
