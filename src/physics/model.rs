@@ -185,11 +185,10 @@ impl RigidBodyModel {
         )
     }
 
-    /// Shock propagation (SPEC.md §5.2): if the pair of `a` (lower id) and `b` is a resting
-    /// support — with gravity, a normal within 45° of the vertical, and the lower body not
-    /// moving vertically faster than [`RigidBodyModel::resting_speed`] — the lower body's id.
-    /// Every other body contact is a symmetric pair. A pure function of the pair, so both
-    /// bodies classify it alike.
+    /// Shock propagation (SPEC.md §5.2): if the pair of `a` (lower id) and `b` is a support —
+    /// with gravity, a normal within 45° of the vertical — the lower body's id. Every other
+    /// body contact is a symmetric pair. A pure function of the pair, so both bodies classify
+    /// it alike.
     fn support(&self, a: &Body, b: &Body, m: &PairManifold) -> Option<BodyId> {
         let g = self.gravity.norm();
         if g <= 0.0 {
@@ -204,13 +203,7 @@ impl RigidBodyModel {
         } else {
             return None;
         };
-        (lower.linvel.dot(&up).abs() <= self.resting_speed()).then_some(lower.id)
-    }
-
-    /// Vertical speed up to which a body carrying another counts as resting (shock
-    /// propagation): one step of gravity plus the separation allowance.
-    fn resting_speed(&self) -> f32 {
-        self.gravity.norm() * self.dt + self.params.max_separation_speed
+        Some(lower.id)
     }
 
     /// Whether a deferred impact is only projected (without gravity, SPEC.md §5.3): it keeps
