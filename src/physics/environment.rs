@@ -32,3 +32,20 @@ pub struct Environment {
     /// Restitution of static surfaces.
     pub restitution: f32,
 }
+
+/// The declared domain of a scene, `[min, max)` on every axis: a body whose centre is not
+/// in it after a step is removed (SPEC.md §3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DomainBox {
+    /// Lower corner (inside).
+    pub min: Vec3,
+    /// Upper corner (outside, as for the scene's initial positions).
+    pub max: Vec3,
+}
+
+impl DomainBox {
+    /// Whether `p` lies in the domain: `min <= p < max` on every axis.
+    pub fn contains(&self, p: &Vec3) -> bool {
+        (0..3).all(|k| p[k] >= self.min[k] && p[k] < self.max[k])
+    }
+}

@@ -7,12 +7,13 @@ mod environment;
 mod event;
 pub mod metrics;
 mod model;
+mod pair;
 mod params;
 mod solver;
 
 pub use body::{Body, Material, Shape};
 pub use contact::{ContactPoint, ContactSet};
-pub use environment::{Environment, Plane, StaticCuboid};
+pub use environment::{DomainBox, Environment, Plane, StaticCuboid};
 pub use event::EventKind;
 pub use model::RigidBodyModel;
 pub use params::SolverParams;

@@ -5,10 +5,11 @@ use super::contact::{
     environment_contacts, keep_distance, near, pair_manifold, speculative_distance, view,
     ContactSet, PairManifold,
 };
-use super::environment::Environment;
+use super::environment::{DomainBox, Environment};
 use super::event::EventKind;
+use super::pair::{Edge, PairContact, PairEffect};
 use super::params::SolverParams;
-use super::solver::solve_body;
+use super::solver::{integrate_rotation, solve_body};
 use crate::frame::Event;
 use crate::grid::Grid;
 use crate::hash::StateHash;
@@ -31,7 +32,36 @@ pub struct RigidBodyModel {
     pub params: SolverParams,
     /// The static environment.
     pub environment: Environment,
+    /// The declared domain: a body whose centre leaves it after a step is removed, with a
+    /// `LeftDomain` event (SPEC.md §3).
+    pub domain: DomainBox,
+    /// Largest bounding radius of any body (the pair matching reads two contacts deep,
+    /// [`CellModel::may_affect`]).
+    pub max_radius: f32,
 }
+
+/// A body partner whose contact is solved as a symmetric pair (SPEC.md §5.3).
+struct PairEntry<'a> {
+    /// The partner.
+    partner: &'a Body,
+    /// The partner's cell relative to the centre cell.
+    offset: [i32; 3],
+    /// The pair at step `t`, in canonical order.
+    contact: PairContact,
+}
+
+/// What one body touches at step `t`.
+struct Contacts<'a> {
+    /// Contact sets of the per-body solve: partners the body rests on, then the environment.
+    sets: Vec<ContactSet>,
+    /// Symmetric pair contacts, ascending partner id.
+    pairs: Vec<PairEntry<'a>>,
+    /// Whether every body partner with contact points was quiet at step `t` (SPEC.md §5.4).
+    partners_quiet: bool,
+}
+
+/// Manifolds of the pairs computed for one cell, keyed by (lower id, higher id).
+type ManifoldCache = Vec<(BodyId, BodyId, Option<PairManifold>)>;
 
 impl RigidBodyModel {
     /// Largest displacement of a body's centre in one step (the speed cap times `dt`).
@@ -51,27 +81,20 @@ impl RigidBodyModel {
         2.0 * max_radius + self.prediction()
     }
 
-    /// Contact sets of body `own` against the neighbourhood and the environment, in
-    /// ascending partner id then static.
-    ///
-    /// Also returns whether every body partner with contact points (those ignored by shock
-    /// propagation included) was quiet at step `t` (sleeping, SPEC.md §5.4).
-    fn contact_sets(
+    /// Contacts of body `own` against the neighbourhood and the environment: the sets of
+    /// the per-body solve (ascending partner id, static last) and the symmetric pairs.
+    fn contacts<'a>(
         &self,
-        own: &Candidate<'_>,
-        candidates: &[Candidate<'_>],
-        cache: &mut Vec<(BodyId, BodyId, Option<PairManifold>)>,
-    ) -> (Vec<ContactSet>, bool) {
+        own: &Candidate<'a>,
+        candidates: &[Candidate<'a>],
+        cache: &mut ManifoldCache,
+    ) -> Contacts<'a> {
         let mut partners_quiet = true;
         let cap = self.prediction();
         let (g, margin) = (self.gravity.norm(), self.params.margin);
         let slack = self.filter_slack();
         let mut sets = Vec::new();
-        let up = if g > 0.0 {
-            -self.gravity / g
-        } else {
-            Vec3::zeros()
-        };
+        let mut pairs = Vec::new();
         for c in candidates {
             if c.body.id == own.body.id
                 || !own.may_touch(c, slack)
@@ -80,47 +103,36 @@ impl RigidBodyModel {
                 continue;
             }
             let j = c.body;
-            let (a, b) = if own.body.id < j.id {
-                (own.body, j)
-            } else {
-                (j, own.body)
-            };
+            let (a, b) = canonical(own.body, j);
             let reach = speculative_distance(a, Some(b), self.dt, g, margin, cap);
             if !near(a, b, reach) || !own.boxes_within(c, reach + slack) {
                 continue;
             }
-            let m = match cache.binary_search_by_key(&(a.id, b.id), |e| (e.0, e.1)) {
-                Ok(pos) => cache[pos].2.clone(),
-                Err(pos) => {
-                    let keep = keep_distance(
-                        reach,
-                        a.shape.bounding_radius(),
-                        b.shape.bounding_radius(),
-                        cap,
-                    );
-                    let m = pair_manifold(a, b, reach, keep);
-                    cache.insert(pos, (a.id, b.id, m.clone()));
-                    m
-                }
+            let Some(m) = self.manifold(a, b, reach, cache) else {
+                continue;
             };
-            if let Some(m) = m {
-                partners_quiet &= j.is_quiet(self.params.sleep_speed);
-                let mut set = view(own.body, j, &m);
-                // Shock propagation: a partner resting on `own` (normal pointing down
-                // towards `own`) is ignored; a partner `own` rests on is treated as immovable.
-                let up = set.points[0].normal.dot(&up);
-                if up < -SUPPORT_COSINE {
-                    continue;
-                }
-                if up > SUPPORT_COSINE {
+            partners_quiet &= j.is_quiet(self.params.sleep_speed);
+            match self.support(a, b, &m) {
+                // Shock propagation: a partner resting on `own` is ignored; a partner `own`
+                // rests on is immovable.
+                Some(lower) if lower == own.body.id => {}
+                Some(_) => {
+                    let mut set = view(own.body, j, &m);
                     for p in &mut set.points {
                         p.partner_inv_mass = 0.0;
                     }
+                    sets.push(set);
                 }
-                sets.push(set);
+                None if self.is_asleep(a) && self.is_asleep(b) => {}
+                None => pairs.push(PairEntry {
+                    partner: j,
+                    offset: c.offset,
+                    contact: self.pair_contact(a, b, &m),
+                }),
             }
         }
         sets.sort_unstable_by_key(|s| s.partner);
+        pairs.sort_unstable_by_key(|p| p.partner.id);
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
         let radius = own.body.shape.bounding_radius();
         if let Some(env) = environment_contacts(
@@ -131,7 +143,152 @@ impl RigidBodyModel {
         ) {
             sets.push(env);
         }
-        (sets, partners_quiet)
+        Contacts {
+            sets,
+            pairs,
+            partners_quiet,
+        }
+    }
+
+    /// The manifold of `a` (lower id) and `b` within `reach`, computed once per cell.
+    fn manifold(
+        &self,
+        a: &Body,
+        b: &Body,
+        reach: f32,
+        cache: &mut ManifoldCache,
+    ) -> Option<PairManifold> {
+        match cache.binary_search_by_key(&(a.id, b.id), |e| (e.0, e.1)) {
+            Ok(pos) => cache[pos].2.clone(),
+            Err(pos) => {
+                let keep = keep_distance(
+                    reach,
+                    a.shape.bounding_radius(),
+                    b.shape.bounding_radius(),
+                    self.prediction(),
+                );
+                let m = pair_manifold(a, b, reach, keep);
+                cache.insert(pos, (a.id, b.id, m.clone()));
+                m
+            }
+        }
+    }
+
+    /// The pair contact of `a` (lower id) and `b` with the combined material.
+    fn pair_contact(&self, a: &Body, b: &Body, m: &PairManifold) -> PairContact {
+        PairContact::new(
+            a,
+            b,
+            m,
+            0.5 * (a.friction + b.friction),
+            0.5 * (a.restitution + b.restitution),
+            self.dt,
+        )
+    }
+
+    /// Shock propagation (SPEC.md §5.2): if the pair of `a` (lower id) and `b` is a support —
+    /// with gravity, a normal within 45° of the vertical — the lower body's id. Every other
+    /// body contact is a symmetric pair. A pure function of the pair, so both bodies classify
+    /// it alike.
+    fn support(&self, a: &Body, b: &Body, m: &PairManifold) -> Option<BodyId> {
+        let g = self.gravity.norm();
+        if g <= 0.0 {
+            return None;
+        }
+        let up = -self.gravity / g;
+        let c = m.normal_ab.dot(&up);
+        let lower = if c > SUPPORT_COSINE {
+            a
+        } else if c < -SUPPORT_COSINE {
+            b
+        } else {
+            return None;
+        };
+        Some(lower.id)
+    }
+
+    /// Whether a deferred impact is only projected (without gravity, SPEC.md §5.3): it keeps
+    /// its velocities, which only impulses change; under gravity it would gain `g·dt` of
+    /// approach per step while its position is held, so it is resolved with split masses.
+    fn matched(&self) -> bool {
+        self.gravity == Vec3::zeros()
+    }
+
+    /// Approaches slower than this are plastic (restitution 0): two substeps of gravity.
+    fn rest_speed(&self) -> f32 {
+        2.0 * self.gravity.norm() * self.dt / self.params.substeps.max(1) as f32
+    }
+
+    /// The closing symmetric pair of `x` and `y`, if they form one: the same tests, in the
+    /// same arithmetic, as [`Self::contacts`].
+    fn edge(&self, x: &Body, y: &Body, cache: &mut ManifoldCache) -> Option<Edge> {
+        let (a, b) = canonical(x, y);
+        if self.is_asleep(a) && self.is_asleep(b) {
+            return None;
+        }
+        let cap = self.prediction();
+        let reach = speculative_distance(
+            a,
+            Some(b),
+            self.dt,
+            self.gravity.norm(),
+            self.params.margin,
+            cap,
+        );
+        if !near(a, b, reach) {
+            return None;
+        }
+        let m = self.manifold(a, b, reach, cache)?;
+        if self.support(a, b, &m).is_some() {
+            return None;
+        }
+        self.pair_contact(a, b, &m).edge(self.rest_speed())
+    }
+
+    /// What `own`'s pair with `entry` (closing, as `edge`) meets among the closing symmetric
+    /// pairs of its two bodies whose partner lies in a cell both bodies' cells see (both cells
+    /// survey the same set, so they agree, SPEC.md §5.3): the mass-splitting counts of `own`
+    /// and of the partner (1 plus their other closing pairs), and whether an impact of either
+    /// body comes first in the matching.
+    fn survey(
+        &self,
+        own: &Body,
+        entry: &PairEntry<'_>,
+        edge: Edge,
+        pairs: &[PairEntry<'_>],
+        nb: &Neighbourhood<'_, Body>,
+        cache: &mut ManifoldCache,
+    ) -> (u32, u32, bool) {
+        let ob = entry.offset;
+        let shared = |o: [i32; 3]| (0..3).all(|k| (o[k] - ob[k]).abs() <= 1);
+        let rest = self.rest_speed();
+        let beats = |e: &Edge| e.impact && e.key < edge.key;
+        let mut beaten = false;
+        let mut mine = 1;
+        for p in pairs {
+            if p.partner.id != entry.partner.id && shared(p.offset) {
+                if let Some(e) = p.contact.edge(rest) {
+                    mine += 1;
+                    beaten |= beats(&e);
+                }
+            }
+        }
+        let mut theirs = 1;
+        for (slot, cell) in nb.cells.iter().enumerate() {
+            if !shared(Neighbourhood::<Body>::offset(slot)) {
+                continue;
+            }
+            for k in cell.iter() {
+                if k.id == own.id || k.id == entry.partner.id {
+                    continue;
+                }
+                if let Some(e) = self.edge(entry.partner, k, cache) {
+                    theirs += 1;
+                    beaten |= beats(&e);
+                }
+            }
+        }
+        (mine, theirs, beaten)
     }
 
     /// Slack added to the broad-phase filters so that they stay supersets of the exact
@@ -197,6 +354,8 @@ impl RigidBodyModel {
 /// move in one step.
 struct Candidate<'a> {
     body: &'a Body,
+    /// The body's cell relative to the centre cell.
+    offset: [i32; 3],
     /// `dt·(|v| + |ω|·r)` (the farthest any surface point moves in the step), at most the
     /// prediction.
     motion: f32,
@@ -207,12 +366,13 @@ struct Candidate<'a> {
 }
 
 impl<'a> Candidate<'a> {
-    fn new(body: &'a Body, dt: f32, prediction: f32) -> Candidate<'a> {
+    fn new(body: &'a Body, offset: [i32; 3], dt: f32, prediction: f32) -> Candidate<'a> {
         let r = body.shape.bounding_radius();
         let motion = dt * (body.linvel.norm() + body.angvel.norm() * r);
         let motion = motion.min(prediction);
         Candidate {
             body,
+            offset,
             motion,
             sweep: r + motion,
             half_box: OnceCell::new(),
@@ -243,6 +403,51 @@ impl<'a> Candidate<'a> {
         let d = (self.body.position - other.body.position).abs();
         let limit = self.half_box() + other.half_box();
         (0..3).all(|k| d[k] <= limit[k] + distance)
+    }
+}
+
+/// The pair in canonical order: lower id first.
+fn canonical<'a>(x: &'a Body, y: &'a Body) -> (&'a Body, &'a Body) {
+    if x.id < y.id {
+        (x, y)
+    } else {
+        (y, x)
+    }
+}
+
+/// Panics if a component of `b`'s state is not finite: a NaN or an infinity is a model
+/// defect, never a reason to drop the body silently (SPEC.md §5.3).
+fn assert_finite(b: &Body, step: Step) {
+    let q = b.rotation.quaternion();
+    let fields: [(&str, [f32; 4], &[&str]); 4] = [
+        (
+            "linear velocity",
+            [b.linvel.x, b.linvel.y, b.linvel.z, 0.0],
+            &["x", "y", "z"],
+        ),
+        (
+            "angular velocity",
+            [b.angvel.x, b.angvel.y, b.angvel.z, 0.0],
+            &["x", "y", "z"],
+        ),
+        (
+            "position",
+            [b.position.x, b.position.y, b.position.z, 0.0],
+            &["x", "y", "z"],
+        ),
+        ("orientation", [q.w, q.i, q.j, q.k], &["w", "x", "y", "z"]),
+    ];
+    for (name, values, axes) in fields {
+        for (axis, v) in axes.iter().zip(values) {
+            if !v.is_finite() {
+                panic!(
+                    "body {} at step {step}: {name} {axis} is {v:?} (0x{:08x}) after computing step {step} -> {}",
+                    b.id,
+                    v.to_bits(),
+                    step + 1
+                );
+            }
+        }
     }
 }
 
@@ -297,7 +502,7 @@ impl CellModel for RigidBodyModel {
                 let (lo, hi, own_sweep) = nb.own().iter().fold(
                     (Vec3::repeat(f32::MAX), Vec3::repeat(f32::MIN), 0.0f32),
                     |(lo, hi, w), b| {
-                        let c = Candidate::new(b, self.dt, self.prediction());
+                        let c = Candidate::new(b, [0; 3], self.dt, self.prediction());
                         (lo.inf(&b.position), hi.sup(&b.position), w.max(c.sweep))
                     },
                 );
@@ -305,37 +510,90 @@ impl CellModel for RigidBodyModel {
                 // Sized for the whole neighbourhood up front: a filtered collect grows by
                 // reallocation (4, 8, 16, ... candidates), a measurable share of a step.
                 candidates.reserve_exact(nb.cells.iter().map(|c| c.len()).sum());
-                candidates.extend(
-                    nb.iter()
-                        .map(|b| Candidate::new(b, self.dt, self.prediction()))
-                        .filter(|c| {
-                            let p = c.body.position;
-                            (0..3).all(|k| {
-                                p[k] >= lo[k] - grow - c.sweep && p[k] <= hi[k] + grow + c.sweep
-                            })
-                        }),
-                );
+                for (slot, cell) in nb.cells.iter().enumerate() {
+                    let offset = Neighbourhood::<Body>::offset(slot);
+                    candidates.extend(
+                        cell.iter()
+                            .map(|b| Candidate::new(b, offset, self.dt, self.prediction()))
+                            .filter(|c| {
+                                let p = c.body.position;
+                                (0..3).all(|k| {
+                                    p[k] >= lo[k] - grow - c.sweep && p[k] <= hi[k] + grow + c.sweep
+                                })
+                            }),
+                    );
+                }
             }
-            let me = Candidate::new(own, self.dt, self.prediction());
-            let (sets, partners_quiet) = self.contact_sets(&me, &candidates, &mut cache);
-            let mut next = solve_body(own, &sets, self.gravity, self.dt, &self.params);
+            let me = Candidate::new(own, [0; 3], self.dt, self.prediction());
+            let found = self.contacts(&me, &candidates, &mut cache);
+            // Symmetric pairs first (SPEC.md §5.3), each with its bodies' mass-splitting
+            // counts, summed in ascending partner id.
+            let mut effect = PairEffect::default();
+            let rest = self.rest_speed();
+            for entry in &found.pairs {
+                // An impact first in both bodies' matching: full mass. A deferred impact:
+                // only projected without gravity, split masses with gravity. Resting
+                // pairs: split masses.
+                let (resolve, counts) = match entry.contact.edge(rest) {
+                    None => (false, (1, 1)),
+                    Some(edge) => {
+                        let (mine, theirs, beaten) =
+                            self.survey(own, entry, edge, &found.pairs, nb, &mut cache);
+                        if edge.impact && !beaten {
+                            (true, (1, 1))
+                        } else if edge.impact && self.matched() {
+                            (false, (1, 1))
+                        } else if own.id < entry.partner.id {
+                            (true, (mine, theirs))
+                        } else {
+                            (true, (theirs, mine))
+                        }
+                    }
+                };
+                effect.add(&entry.contact.effect(own.id, resolve, counts, self.dt, rest));
+            }
+            let mut start = own.clone();
+            start.linvel += effect.dv;
+            start.angvel += effect.dw;
+            let mut next = solve_body(&start, &found.sets, self.gravity, self.dt, &self.params);
+            next.position += effect.dx;
+            if effect.dtheta != Vec3::zeros() {
+                next.rotation = integrate_rotation(&next.rotation, &effect.dtheta, 1.0);
+            }
+            assert_finite(&next, step);
             self.cap(own, &mut next, step, events);
             let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);
-            next.rest_steps = if self.sleeping() && partners_quiet && quiet(own) && quiet(&next) {
-                (own.rest_steps + 1).min(self.params.sleep_steps)
-            } else {
-                0
-            };
+            next.rest_steps =
+                if self.sleeping() && found.partners_quiet && quiet(own) && quiet(&next) {
+                    (own.rest_steps + 1).min(self.params.sleep_steps)
+                } else {
+                    0
+                };
+            if !self.domain.contains(&next.position) {
+                events.push(Event {
+                    step,
+                    body: next.id,
+                    kind: EventKind::LeftDomain,
+                });
+                continue;
+            }
             out.push(next);
         }
     }
 
-    /// A body's step reads a neighbour only through `can_reach` (contacts and waking); an
-    /// all-asleep neighbourhood freezes exactly the bodies no awake body reaches.
+    /// A body's step reads a neighbour through `can_reach` (contacts and waking), and, for
+    /// the matching of its symmetric pairs, the partners of its partners: any body within
+    /// two contacts (`r_i + r_k + 2·(r_max + prediction)` between centres). An all-asleep
+    /// neighbourhood freezes exactly the bodies no awake body reaches.
     fn may_affect(&self, reader: &Body, other: &Body) -> bool {
-        self.can_reach(reader, other)
+        if self.can_reach(reader, other) {
+            return true;
+        }
+        let two = reader.shape.bounding_radius()
+            + other.shape.bounding_radius()
+            + 2.0 * (self.max_radius + self.prediction());
+        (reader.position - other.position).norm_squared() <= two * two
     }
-
     fn hash_state(b: &Body, h: &mut StateHash) {
         for v in [&b.position, &b.linvel, &b.angvel] {
             for k in 0..3 {

@@ -9,7 +9,8 @@
 //! computed once per pass, and rotations inside a pass are linearised (`r + δθ × r`).
 
 use super::body::Body;
-use super::contact::ContactSet;
+use super::body::Shape;
+use super::contact::{ContactPoint, ContactSet};
 use super::params::SolverParams;
 use crate::math::{Quat, Vec3};
 use nalgebra::{Matrix3, Quaternion};
@@ -19,7 +20,7 @@ use nalgebra::{Matrix3, Quaternion};
 const IMPACT_TOLERANCE: f32 = 1e-4;
 
 /// Advances `q` by angular velocity `w` over `h` seconds (first order, renormalised).
-fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
+pub(crate) fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
     let dq = Quaternion::new(0.0, w.x, w.y, w.z) * q.quaternion() * (0.5 * h);
     Quat::new_normalize(q.quaternion() + dq)
 }
@@ -91,6 +92,15 @@ struct ImpactRow {
     gap_speed: f32,
 }
 
+/// Offset of contact point `cp` from the body's centre at orientation `rot` (a ball's is
+/// along the normal whatever its orientation: a normal force on a ball has no torque).
+fn offset(body: &Body, rot: &Matrix3<f32>, cp: &ContactPoint) -> Vec3 {
+    match body.shape {
+        Shape::Ball { radius } => -cp.normal * radius,
+        Shape::Cuboid { .. } => rot * cp.anchor,
+    }
+}
+
 /// Applies impulse `imp` at offset `r` to the velocities `v`, `w`.
 fn apply_impulse(f: &Frame, v: &mut Vec3, w: &mut Vec3, r: &Vec3, imp: &Vec3) {
     *v += imp * f.inv_mass;
@@ -132,7 +142,7 @@ pub(crate) fn solve_body(
         let mut k = 0;
         for set in sets {
             for cp in &set.points {
-                let r = f0.rot * cp.anchor;
+                let r = offset(&b, &f0.rot, cp);
                 let vi = b.linvel + b.angvel.cross(&r);
                 offsets[k] = r;
                 scratch[k] = PointScratch {
@@ -221,7 +231,7 @@ pub(crate) fn solve_body(
             let mut dtheta = Vec3::zeros();
             let mut touched = false;
             for (m, cp) in set.points.iter().enumerate() {
-                let r0 = fp.rot * cp.anchor;
+                let r0 = offset(&b, &fp.rot, cp);
                 let rn = r0.cross(&cp.normal);
                 let irn = fp.inv_inertia * rn;
                 let pj = cp.partner_point + cp.partner_velocity * h;
@@ -301,7 +311,7 @@ pub(crate) fn solve_body(
                 if normal_impulse <= 0.0 {
                     continue;
                 }
-                let r = f1.rot * cp.anchor;
+                let r = offset(&b, &f1.rot, cp);
                 let vrel = b.linvel + b.angvel.cross(&r) - cp.partner_velocity;
                 let vn = cp.normal.dot(&vrel);
                 let vt = vrel - cp.normal * vn;
@@ -330,8 +340,11 @@ pub(crate) fn solve_body(
                     let limit = cap * wt_total;
                     dv -= vt / vt_len * vt_len.min(limit);
                 }
-                if dv != Vec3::zeros() {
-                    let dir_len = dv.norm();
+                // A change whose squared length underflows (subnormal components) has no
+                // direction: normalising it gave 0/0 = NaN (issue 23). Its length is then 0
+                // to f32 precision and it is skipped.
+                let dir_len = dv.norm();
+                if dir_len > 0.0 {
                     let dir = dv / dir_len;
                     let w = f1.inv_mass_at(&r, &dir) + cp.partner_inv_mass;
                     let imp = dir * (dir_len / w);

@@ -14,7 +14,8 @@ pub use file::{load_scene_file, parse_scene, SceneFormat};
 use crate::grid::Grid;
 use crate::math::{Quat, Vec3};
 use crate::physics::{
-    Body, Environment, Material, Plane, RigidBodyModel, Shape, SolverParams, StaticCuboid,
+    Body, DomainBox, Environment, Material, Plane, RigidBodyModel, Shape, SolverParams,
+    StaticCuboid,
 };
 use serde::{Deserialize, Serialize};
 
@@ -196,6 +197,8 @@ impl Scene {
                 friction: env.friction,
                 restitution: env.restitution,
             },
+            domain: DomainBox { min: lo, max: hi },
+            max_radius: self.max_radius().max(0.05),
         }
     }
 

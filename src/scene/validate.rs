@@ -207,6 +207,32 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
             ));
         }
         c.positive(&f("material.density"), b.material.density)?;
+        // Mass and inertia derived in f32 must be finite and non-zero: a radius of 1e-38 m
+        // passes the checks above but its inertia underflows, and the solver would turn the
+        // infinite inverse into NaN (a hard error at the first step, SPEC.md §5.3).
+        let probe = crate::physics::Body::new(
+            b.id,
+            b.shape,
+            b.material,
+            nalgebra::Vector3::zeros(),
+            nalgebra::UnitQuaternion::identity(),
+        );
+        let inverse = [
+            probe.inv_mass,
+            probe.inv_inertia.x,
+            probe.inv_inertia.y,
+            probe.inv_inertia.z,
+        ];
+        if !inverse.iter().all(|v| v.is_finite() && *v > 0.0) {
+            return Err(c.fail(
+                f("shape"),
+                b.shape,
+                &format!(
+                    "the mass ({} kg) and moments of inertia derived from the size and density must be finite and non-zero in f32 (the body is too small or too large)",
+                    b.material.density * b.shape.volume()
+                ),
+            ));
+        }
         c.range(
             &f("material.friction"),
             b.material.friction,

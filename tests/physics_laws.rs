@@ -1,0 +1,603 @@
+//! Physical laws the rigid-body model must keep on any scene, not only on cube piles
+//! (issue 23): momentum in isolated collisions, energy in closed systems, restitution,
+//! rolling, resting contacts, no NaN, and removal only at the declared domain's edge.
+//! Property tests draw sizes, masses, velocities, spins and contact geometries.
+
+use proptest::prelude::*;
+use soda::physics::{Material, Shape};
+use soda::scene::BodySpec;
+use soda::sim::Simulation;
+use soda::{Body, RigidBodyModel, Scene, SceneBuilder};
+
+/// The state sorted by id, cloned.
+fn bodies(sim: &Simulation) -> Vec<Body> {
+    sim.state()
+        .sorted::<RigidBodyModel>()
+        .into_iter()
+        .cloned()
+        .collect()
+}
+
+/// Total linear momentum, kg·m/s, summed in f64 in id order.
+fn momentum(bs: &[Body]) -> [f64; 3] {
+    let mut p = [0.0f64; 3];
+    for b in bs {
+        for (k, pk) in p.iter_mut().enumerate() {
+            *pk += b.mass() as f64 * b.linvel[k] as f64;
+        }
+    }
+    p
+}
+
+/// Σ m·|v|: the scale momentum errors are measured against.
+fn momentum_scale(bs: &[Body]) -> f64 {
+    bs.iter()
+        .map(|b| b.mass() as f64 * b.linvel.norm() as f64)
+        .sum()
+}
+
+fn kinetic(bs: &[Body]) -> f64 {
+    soda::physics::metrics::kinetic_energy(bs.iter())
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// A free-space scene: no gravity, no ground, no walls, an 80 m box.
+fn free_space() -> SceneBuilder {
+    SceneBuilder::new([-40.0; 3], [40.0; 3])
+        .gravity([0.0; 3])
+        .ground(None)
+}
+
+/// A body as drawn by the strategies.
+#[derive(Clone, Debug)]
+struct Drawn {
+    shape: Shape,
+    density: f32,
+    rotation: [f32; 3],
+    spin: [f32; 3],
+}
+
+impl Drawn {
+    /// Radius of the largest ball about the centre inside the shape.
+    fn inner_radius(&self) -> f32 {
+        match self.shape {
+            Shape::Ball { radius } => radius,
+            Shape::Cuboid { half_extents: h } => h[0].min(h[1]).min(h[2]),
+        }
+    }
+}
+
+fn shape() -> impl Strategy<Value = Shape> {
+    prop_oneof![
+        (0.15f32..0.8).prop_map(|radius| Shape::Ball { radius }),
+        (0.15f32..0.6, 0.15f32..0.6, 0.15f32..0.6).prop_map(|(x, y, z)| Shape::Cuboid {
+            half_extents: [x, y, z]
+        }),
+    ]
+}
+
+fn drawn() -> impl Strategy<Value = Drawn> {
+    (
+        shape(),
+        0.3f32..4.0,
+        prop::array::uniform3(-3.1f32..3.1),
+        prop::array::uniform3(-4.0f32..4.0),
+    )
+        .prop_map(|(shape, density, rotation, spin)| Drawn {
+            shape,
+            density,
+            rotation,
+            spin,
+        })
+}
+
+fn spec(
+    id: u64,
+    d: &Drawn,
+    material: Material,
+    position: [f32; 3],
+    velocity: [f32; 3],
+) -> BodySpec {
+    BodySpec {
+        id,
+        shape: d.shape,
+        material: Material {
+            density: d.density,
+            ..material
+        },
+        position,
+        rotation: d.rotation,
+        velocity,
+        angular_velocity: d.spin,
+    }
+}
+
+/// Runs `scene` for `steps` steps; returns the states after every step (step 0 first).
+fn history(scene: Scene, steps: u32) -> Vec<Vec<Body>> {
+    let mut sim = Simulation::new(scene);
+    let mut out = vec![bodies(&sim)];
+    for _ in 0..steps {
+        sim.step();
+        out.push(bodies(&sim));
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// Two bodies of any shapes, sizes, masses, spins and orientations meet in free space,
+    /// head-on or off-centre: total momentum is the same after the collision (1e-4 of
+    /// Σ m·|v|), and the collision did happen.
+    #[test]
+    fn isolated_pair_collision_conserves_momentum(
+        a in drawn(),
+        b in drawn(),
+        speed_a in 0.5f32..8.0,
+        speed_b in 0.0f32..8.0,
+        lateral in prop::array::uniform2(-0.8f32..0.8),
+        friction in 0.0f32..1.0,
+        restitution in 0.0f32..1.0,
+    ) {
+        let material = Material { density: 1.0, friction, restitution };
+        let ra = a.shape.bounding_radius();
+        let rb = b.shape.bounding_radius();
+        // Lateral offset within 80 % of the inner radii: the bodies must hit.
+        let reach = a.inner_radius() + b.inner_radius();
+        let (y, z) = (lateral[0] * reach * 0.7, lateral[1] * reach * 0.7);
+        let mut builder = free_space();
+        builder = builder.body_spec(spec(0, &a, material, [-ra - 0.3, 0.0, 0.0], [speed_a, 0.0, 0.0]));
+        builder = builder.body_spec(spec(1, &b, material, [rb + 0.3, y, z], [-speed_b, 0.0, 0.0]));
+        let h = history(builder.build().unwrap(), 90);
+        let (first, last) = (&h[0], &h[h.len() - 1]);
+        prop_assert_eq!(last.len(), 2);
+        let moved = (last[0].linvel - first[0].linvel).norm() > 1e-3;
+        prop_assert!(moved, "no collision happened: {:?}", last[0].linvel);
+        let scale = momentum_scale(first);
+        for (step, s) in h.iter().enumerate() {
+            let err = distance(momentum(s), momentum(first));
+            prop_assert!(
+                err <= 1e-4 * scale,
+                "step {}: momentum {:?} vs {:?} at step 0 (error {} > 1e-4 × {})",
+                step, momentum(s), momentum(first), err, scale
+            );
+        }
+    }
+
+    /// Restitution measured from head-on collisions of two balls or two face-aligned boxes
+    /// (any sizes and masses, no friction effects on a head-on hit) is the material's
+    /// within ±0.05.
+    #[test]
+    fn head_on_restitution_matches_the_material(
+        cubes in any::<bool>(),
+        sa in 0.2f32..0.8,
+        sb in 0.2f32..0.8,
+        da in 0.3f32..4.0,
+        db in 0.3f32..4.0,
+        va in 0.5f32..8.0,
+        vb in -3.0f32..3.0,
+        restitution in 0.0f32..=1.0,
+        friction in 0.0f32..1.0,
+    ) {
+        let shape = |s: f32| if cubes { Shape::Cuboid { half_extents: [s; 3] } } else { Shape::Ball { radius: s } };
+        let body = |id, s, d, x: f32, v: f32| BodySpec {
+            id,
+            shape: shape(s),
+            material: Material { density: d, friction, restitution },
+            position: [x, 0.0, 0.0],
+            rotation: [0.0; 3],
+            velocity: [v, 0.0, 0.0],
+            angular_velocity: [0.0; 3],
+        };
+        let builder = free_space()
+            .body_spec(body(0, sa, da, -sa - 0.25, va))
+            .body_spec(body(1, sb, db, sb + 0.25, vb.min(va - 0.5)));
+        let h = history(builder.build().unwrap(), 90);
+        let approach = h[0][0].linvel.x - h[0][1].linvel.x;
+        let last = &h[h.len() - 1];
+        let separation = last[1].linvel.x - last[0].linvel.x;
+        let e = separation / approach;
+        prop_assert!(
+            (e - restitution).abs() <= 0.05,
+            "measured e = {} (separation {} / approach {}), material e = {}",
+            e, separation, approach, restitution
+        );
+    }
+
+    /// A ball rolling on flat ground — without slip, or spinning slower than rolling so that
+    /// friction acts — any radius, density, speed and friction, never speeds up and never
+    /// gains kinetic energy (600 steps).
+    #[test]
+    fn rolling_ball_never_speeds_up(
+        r in 0.1f32..1.0,
+        density in 0.3f32..4.0,
+        v in 0.05f32..5.0,
+        friction in 0.0f32..1.0,
+        slip in 0.0f32..1.0,
+    ) {
+        let builder = SceneBuilder::new([-60.0, -1.0, -60.0], [60.0, 5.0, 60.0])
+            .environment_material(friction, 0.0)
+            .body_spec(BodySpec {
+                id: 0,
+                shape: Shape::Ball { radius: r },
+                material: Material { density, friction, restitution: 0.0 },
+                position: [-50.0, r, 0.0],
+                rotation: [0.3, -1.1, 2.0],
+                velocity: [v, 0.0, 0.0],
+                // Rolling (slip 0) to sliding on a still ball (slip 1).
+                angular_velocity: [0.0, 0.0, -(1.0 - slip) * v / r],
+            });
+        let h = history(builder.build().unwrap(), 600);
+        let v0 = h[0][0].linvel.norm();
+        for (step, pair) in h.windows(2).enumerate() {
+            let speed = pair[1][0].linvel.norm();
+            prop_assert!(speed <= v0 * (1.0 + 1e-4) + 1e-6, "step {}: {} m/s > {} m/s", step + 1, speed, v0);
+            let (e0, e1) = (kinetic(&pair[0]), kinetic(&pair[1]));
+            prop_assert!(e1 <= e0 * (1.0 + 1e-5) + 1e-9, "step {}: kinetic energy {} J -> {} J", step + 1, e0, e1);
+        }
+    }
+}
+
+/// A dense gas of random-size balls (and boxes if `cubes`) without gravity, in a closed box
+/// if `walls`, else in free space (the same lattice, no ground).
+fn ball_gas(
+    n: usize,
+    seed: u64,
+    restitution: f32,
+    friction: f32,
+    cubes: bool,
+    walls: bool,
+) -> Scene {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let side = (n as f64).cbrt().ceil() as usize;
+    let spacing = 1.0f32;
+    let extent = side as f32 * spacing;
+    let (lo, hi) = if walls {
+        (0.0, extent)
+    } else {
+        (-40.0, 40.0 + extent)
+    };
+    let mut b = SceneBuilder::new([lo; 3], [hi; 3])
+        .gravity([0.0; 3])
+        .walls(walls, walls)
+        .ground(walls.then_some(0.0))
+        .environment_material(friction, restitution);
+    for k in 0..n {
+        let c = [k % side, (k / side) % side, k / (side * side)];
+        let pos = c.map(|c| (c as f32 + 0.5) * spacing + rng.random_range(-0.05f32..0.05));
+        let shape = if cubes && k % 3 == 0 {
+            let s = rng.random_range(0.12f32..0.22);
+            Shape::Cuboid {
+                half_extents: [s, rng.random_range(0.12f32..0.22), s],
+            }
+        } else {
+            Shape::Ball {
+                radius: rng.random_range(0.2f32..0.35),
+            }
+        };
+        b = b.body_spec(BodySpec {
+            id: k as u64,
+            shape,
+            material: Material {
+                density: rng.random_range(0.5f32..2.0),
+                friction,
+                restitution,
+            },
+            position: pos,
+            rotation: [
+                rng.random_range(-3.0f32..3.0),
+                0.0,
+                rng.random_range(-3.0f32..3.0),
+            ],
+            velocity: [0, 1, 2].map(|_| rng.random_range(-3.0f32..3.0)),
+            angular_velocity: [0.0; 3],
+        });
+    }
+    b.build().unwrap()
+}
+
+/// An elastic, frictionless gas of 343 balls of random sizes and masses (≈ 10 % of the box's
+/// volume) in a closed box: kinetic energy stays within 1 % of its start over 1,000 steps.
+#[test]
+fn elastic_ball_gas_keeps_its_energy_within_one_percent() {
+    for seed in [1, 2] {
+        let mut sim = Simulation::new(ball_gas(343, seed, 1.0, 0.0, false, true));
+        let e0 = kinetic(&bodies(&sim));
+        let mut worst = 0.0f64;
+        for _ in 0..1000 {
+            sim.step();
+            let e = kinetic(&bodies(&sim));
+            worst = worst.max((e - e0).abs() / e0);
+        }
+        assert_eq!(bodies(&sim).len(), 343, "seed {seed}: bodies lost");
+        assert!(
+            worst <= 0.01,
+            "seed {seed}: kinetic energy drifted by {:.3} % (start {e0:.3} J)",
+            worst * 100.0
+        );
+    }
+}
+
+/// With restitution below 1 (and friction), a dense gas of balls and boxes colliding in
+/// free space — a closed system of body–body contacts only — never gains kinetic energy from
+/// one step to the next (beyond f32 rounding).
+#[test]
+fn inelastic_collisions_never_increase_kinetic_energy() {
+    for (seed, e, mu) in [(3, 0.9, 0.0), (4, 0.5, 0.3), (5, 0.0, 0.8), (6, 0.95, 0.5)] {
+        let mut sim = Simulation::new(ball_gas(216, seed, e, mu, true, false));
+        let mut prev = kinetic(&bodies(&sim));
+        for step in 1..=400 {
+            sim.step();
+            let now = kinetic(&bodies(&sim));
+            assert!(
+                now <= prev * (1.0 + 1e-5) + 1e-9,
+                "seed {seed} (e {e}, μ {mu}): kinetic energy grew at step {step}: {prev} J -> {now} J"
+            );
+            prev = now;
+        }
+    }
+}
+
+/// The same gas in a closed box (walls, ground and ceiling): body–body contacts never add
+/// energy, and a depenetration from a static surface may leave at most
+/// `max_separation_speed` of separating speed (SPEC.md §5.3), so one step may add at most
+/// Σ ½·m·v_sep² (the cube pile needs that allowance; issue 23 leaves it documented).
+#[test]
+fn inelastic_gas_in_a_box_gains_at_most_the_separation_allowance() {
+    for (seed, e, mu) in [(3, 0.9, 0.0), (4, 0.5, 0.3), (5, 0.0, 0.8), (6, 0.95, 0.5)] {
+        let scene = ball_gas(216, seed, e, mu, true, true);
+        let v = scene.solver.max_separation_speed as f64;
+        let allowance: f64 = scene
+            .initial_bodies()
+            .iter()
+            .map(|b| 0.5 * b.mass() as f64 * v * v)
+            .sum();
+        let mut sim = Simulation::new(scene);
+        let mut prev = kinetic(&bodies(&sim));
+        for step in 1..=600 {
+            sim.step();
+            let now = kinetic(&bodies(&sim));
+            assert!(
+                now <= prev + allowance + 1e-9,
+                "seed {seed} (e {e}, μ {mu}): kinetic energy grew at step {step}: {prev} J -> {now} J (allowance {allowance} J)"
+            );
+            prev = now;
+        }
+    }
+}
+
+/// Two clusters of balls and boxes meet head-on in free space with equal and opposite
+/// momentum: total momentum stays 0 (1e-4 of Σ m·|v|) through the collision.
+#[test]
+fn cluster_collision_conserves_momentum() {
+    let mut b = free_space();
+    let mut id = 0;
+    for side in [-1.0f32, 1.0] {
+        for k in 0..27 {
+            let c = [k % 3, (k / 3) % 3, k / 9].map(|c| c as f32 - 1.0);
+            let shape = if k % 2 == 0 {
+                Shape::Ball { radius: 0.4 }
+            } else {
+                Shape::Cuboid {
+                    half_extents: [0.35, 0.4, 0.3],
+                }
+            };
+            b = b.body_spec(BodySpec {
+                id,
+                shape,
+                material: Material {
+                    density: 1.0,
+                    friction: 0.5,
+                    restitution: 0.3,
+                },
+                position: [side * (2.5 + c[0]) + 0.05 * c[1], c[1] + 0.1 * c[2], c[2]],
+                rotation: [0.1 * c[0], 0.2 * c[1], 0.3 * c[2]],
+                velocity: [-side * 3.0, 0.0, 0.0],
+                angular_velocity: [0.0; 3],
+            });
+            id += 1;
+        }
+    }
+    let h = history(b.build().unwrap(), 300);
+    let scale = momentum_scale(&h[0]);
+    let mut touched = false;
+    for (step, s) in h.iter().enumerate() {
+        let p = momentum(s);
+        assert!(
+            distance(p, [0.0; 3]) <= 1e-4 * scale,
+            "step {step}: momentum {p:?} (scale {scale})"
+        );
+        touched |= s.iter().any(|b| b.linvel.x.abs() < 2.0);
+    }
+    assert!(touched, "the clusters never met");
+}
+
+/// Issue 23's body-deleting NaN: a ball resting on the ground, touching a wall with zero
+/// gap, rotated, with a tiny velocity. Any rotation and drift: it stays finite, in the
+/// domain and (nearly) still.
+#[test]
+fn ball_touching_ground_and_wall_with_zero_gap_stays_finite_and_still() {
+    for (k, rotation) in [
+        [-0.714f32, 0.13, -2.913],
+        [0.0, 0.0, 0.0],
+        [3.1, -1.5, 0.7],
+        [1.0, 2.0, 3.0],
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let builder = SceneBuilder::new([-11.0, -1.0, -11.0], [11.0, 16.0, 11.0])
+            .walls(true, false)
+            .body_spec(BodySpec {
+                id: 0,
+                shape: Shape::Ball { radius: 0.5 },
+                material: Material::default(),
+                position: [0.0, 0.5, 10.5],
+                rotation,
+                velocity: [0.001 * (k as f32 + 1.0), 0.0, 0.0],
+                angular_velocity: [0.0; 3],
+            });
+        let mut sim = Simulation::new(builder.build().unwrap());
+        for step in 0..300 {
+            let f = sim.step();
+            assert!(
+                f.events.is_empty(),
+                "rotation {rotation:?}, step {step}: {:?}",
+                f.events
+            );
+        }
+        let b = &bodies(&sim)[0];
+        assert!(b.linvel.norm() < 0.01, "{:?}", b.linvel);
+        assert!((b.position.y - 0.5).abs() < 0.005, "{:?}", b.position);
+        assert!((b.position.z - 10.5).abs() < 0.005, "{:?}", b.position);
+    }
+}
+
+/// A row of balls and boxes resting on the ground against a wall and each other (zero
+/// gaps), with small random drifts and spins: every state stays finite, nothing is removed,
+/// and they come to rest without penetrating.
+#[test]
+fn resting_contacts_against_ground_wall_and_neighbours_stay_finite_and_still() {
+    let mut b = SceneBuilder::new([-6.0, -1.0, -6.0], [6.0, 8.0, 6.0]).walls(true, false);
+    for k in 0..10u64 {
+        let (shape, half) = if k % 2 == 0 {
+            (Shape::Ball { radius: 0.5 }, 0.5)
+        } else {
+            (
+                Shape::Cuboid {
+                    half_extents: [0.5; 3],
+                },
+                0.5,
+            )
+        };
+        b = b.body_spec(BodySpec {
+            id: k,
+            shape,
+            material: Material::default(),
+            position: [6.0 - half - k as f32, half, 0.0],
+            rotation: if k % 2 == 0 {
+                [0.4 * k as f32, 1.0, -0.3]
+            } else {
+                [0.0; 3]
+            },
+            velocity: [0.003 * (k as f32 - 5.0), 0.0, 0.002],
+            angular_velocity: [0.01 * k as f32, -0.02, 0.0],
+        });
+    }
+    let mut sim = Simulation::new(b.build().unwrap());
+    for step in 0..600 {
+        let f = sim.step();
+        assert!(f.events.is_empty(), "step {step}: {:?}", f.events);
+    }
+    let r = soda::sim::measure(sim.reference());
+    assert_eq!(r.bodies, 10);
+    assert!(r.max_speed < 0.01, "max speed {}", r.max_speed);
+    assert!(
+        r.max_penetration < 0.005,
+        "penetration {}",
+        r.max_penetration
+    );
+}
+
+/// A body is removed exactly when its centre leaves the declared domain, not at the grid's
+/// edge (which lies beyond the domain's upper faces): moving at 2 m/s along x through
+/// `domain.max.x`, it is present while its centre is inside and leaves, with one
+/// `left-domain` event, in the step its centre crosses.
+#[test]
+fn a_body_leaves_exactly_when_its_centre_leaves_the_declared_domain() {
+    for (axis, sign) in [(0usize, 1.0f32), (0, -1.0), (2, 1.0), (1, 1.0), (1, -1.0)] {
+        leaves_through_the_face(axis, sign);
+    }
+}
+
+/// A ball moving at 2 m/s along `axis` (towards the upper face if `sign > 0`) in a ±16 m
+/// domain without gravity or ground.
+fn leaves_through_the_face(axis: usize, sign: f32) {
+    let mut v = [0.0; 3];
+    v[axis] = 2.0 * sign;
+    let builder = SceneBuilder::new([-16.0, -16.0, -16.0], [16.0, 16.0, 16.0])
+        .gravity([0.0; 3])
+        .ground(None)
+        .body_spec(BodySpec {
+            id: 0,
+            shape: Shape::Ball { radius: 0.3 },
+            material: Material::default(),
+            position: [0.0; 3],
+            rotation: [0.0; 3],
+            velocity: v,
+            angular_velocity: [0.0; 3],
+        });
+    let scene = builder.build().unwrap();
+    let grid = scene.grid();
+    let face = 16.0 * sign;
+    // The grid reaches past the upper faces (dims = ceil(extent / edge)).
+    assert!(grid.max()[axis] > 16.0, "grid max {}", grid.max()[axis]);
+    let mut sim = Simulation::new(scene);
+    let mut last_inside = None;
+    for step in 1..=600u64 {
+        let f = sim.step();
+        let all = bodies(&sim);
+        match all.first() {
+            Some(b) => {
+                let c = b.position[axis];
+                assert!(
+                    (-16.0..16.0).contains(&c),
+                    "axis {axis}, step {step}: centre {c} outside the domain"
+                );
+                last_inside = Some(c);
+                assert!(f.events.is_empty());
+            }
+            None => {
+                assert_eq!(f.events.len(), 1, "one left-domain event");
+                assert_eq!(f.events[0].kind, soda::frame::EventKind::LeftDomain);
+                let prev = last_inside.expect("it was inside before");
+                // The last position inside was within one step's travel of the face.
+                assert!(
+                    (face - prev).abs() <= 2.0 / 60.0 + 1e-4,
+                    "axis {axis}: left from {prev}"
+                );
+                return;
+            }
+        }
+    }
+    panic!("axis {axis}: the body never left");
+}
+
+/// A NaN or infinity reaching a body's state is a hard error naming the body, the step and
+/// the field (a panic inside the model, which executors report as a typed error), never a
+/// silent removal.
+#[test]
+fn a_non_finite_state_is_a_hard_error_naming_body_step_and_field() {
+    use soda::model::{CellModel, Neighbourhood};
+    let mut b = free_space();
+    b.body(
+        Shape::Ball { radius: 0.5 },
+        Material::default(),
+        [0.0; 3],
+        [0.0; 3],
+    );
+    let scene = b.build().unwrap();
+    let model = scene.model();
+    let grid = scene.grid();
+    let mut body = scene.initial_bodies()[0].clone();
+    body.linvel.y = f32::NAN;
+    let own = [body];
+    let centre = grid.cell_of([0.0; 3]).unwrap();
+    let mut cells: [&[Body]; 27] = [&[]; 27];
+    cells[Neighbourhood::<Body>::CENTRE] = &own;
+    let nb = Neighbourhood { centre, cells };
+    let err = std::panic::catch_unwind(|| {
+        let (mut out, mut events) = (Vec::new(), Vec::new());
+        model.step_cell(34, &grid, &nb, &mut out, &mut events);
+    })
+    .expect_err("a NaN velocity must stop the run");
+    let msg = err.downcast_ref::<String>().cloned().unwrap_or_default();
+    assert!(
+        msg.contains("body 0 at step 34") && msg.contains("linear velocity y is NaN"),
+        "{msg}"
+    );
+}
