@@ -102,7 +102,7 @@ pub mod state;
 pub mod verify;
 
 /// The generic path in one import: implement [`CellModel`], run it with [`Runner`] on any
-/// executor, check it with [`verify`](crate::verify).
+/// executor, check it with [`verify`](mod@crate::verify).
 pub mod prelude {
     pub use crate::exec::control::RunControl;
     pub use crate::exec::error::{ContractRule, ContractViolation, ExecError, InputError};

@@ -553,7 +553,7 @@ fn leaves_through_the_face(axis: usize, sign: f32) {
             }
             None => {
                 assert_eq!(f.events.len(), 1, "one left-domain event");
-                assert_eq!(f.events[0].kind, soda::frame::EventKind::LeftDomain);
+                assert_eq!(f.events[0].kind, soda::EventKind::LeftDomain);
                 let prev = last_inside.expect("it was inside before");
                 // The last position inside was within one step's travel of the face.
                 assert!(

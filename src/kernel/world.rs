@@ -750,7 +750,7 @@ impl<M: CellModel> World<M> {
     }
 
     /// Samples the log size into `peak_log_bytes` (SPEC.md §K9): measured at every
-    /// [`LOG_SAMPLE_EVERY`]-th call and whenever the logs hold more steps than at any call
+    /// `LOG_SAMPLE_EVERY`-th call and whenever the logs hold more steps than at any call
     /// before — the size grows with the steps held, and measuring every time cost ~1 % of a
     /// run.
     pub fn sample_log_bytes(&mut self) {

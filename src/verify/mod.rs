@@ -1,5 +1,5 @@
 //! `verify`: evidence that a model commits the same bits on every executor, for any
-//! [`CellModel`].
+//! [`CellModel`](crate::CellModel).
 //!
 //! [`verify`] runs the reference twice (a model that is not reproducible — hidden state,
 //! unseeded randomness — shows there), once more under the contract checker
