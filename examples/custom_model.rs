@@ -46,10 +46,10 @@ impl CellModel for Heat {
                 .filter(|o| o.id != w.id && (o.x - w.x).abs() < 0.8);
             let heat = w.heat + near.map(|o| 0.1 * (o.heat - w.heat)).sum::<f32>();
             let x = w.x + w.speed;
-            let speed = if x < 0.0 || x >= LENGTH {
-                -w.speed
-            } else {
+            let speed = if (0.0..LENGTH).contains(&x) {
                 w.speed
+            } else {
+                -w.speed
             };
             let x = x.clamp(0.0, LENGTH * 0.9999);
             out.push(Walker {

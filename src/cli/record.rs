@@ -1,4 +1,4 @@
-//! `--record FILE`: committed frames as CSV (README.md §Recording format).
+//! `--record FILE`: committed frames as CSV (docs/formats.md, "Recording format").
 //!
 //! A header line `step,id,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz`, then one row per body per
 //! recorded step, steps ascending and bodies in ascending id order. Recorded steps: the

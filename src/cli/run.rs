@@ -64,7 +64,7 @@ pub struct RunArgs {
 pub struct OutputArgs {
     /// Write committed frames to FILE as CSV (header
     /// `step,id,x,y,z,qw,qx,qy,qz,vx,vy,vz,wx,wy,wz`, one row per body per recorded step, in
-    /// id order; see README.md, "Recording format"). About 120 bytes per body per recorded
+    /// id order; see docs/formats.md, "Recording format"). About 120 bytes per body per recorded
     /// step: 1,000 bodies over 600 steps make 70 MB (a warning above 1 GB). Written to a
     /// temporary file and renamed into place at the end or on Ctrl-C.
     #[arg(long, value_name = "FILE")]

@@ -59,7 +59,7 @@ fn dump(name: &str, objects: Option<usize>, seed: u64) -> Result<()> {
         .with_context(|| format!("cannot write the built-in scene `{name}` as TOML"))?;
     let header = format!(
         "# The built-in scene `{name}` ({} objects, seed {seed}), written by `soda scenes --dump`.\n\
-         # Edit it and run it with `soda run --scene FILE.toml`; README.md, \"Scene files\",\n\
+         # Edit it and run it with `soda run --scene FILE.toml`; docs/formats.md, \"Scene files\",\n\
          # describes every field.\n\n",
         scene.bodies.len()
     );

@@ -249,7 +249,7 @@ impl Balancer {
         // measurement (of the new map) replaces the estimate instead of being averaged with
         // this round's projection: the projection cannot foresee loads that grow unevenly
         // (a pile landing in one territory while empty worlds' bookkeeping stays flat), and
-        // halving every correction left the busiest world ~10 % above its share (README.md,
+        // halving every correction left the busiest world ~10 % above its share (docs/performance.md,
         // Load balancing). Moved cells still cool down, so this does not make them bounce.
         self.smoothed = (moved == 0).then_some(est);
         self.history.push(RoundRecord {
