@@ -984,6 +984,30 @@ fn example_models_run_verify_and_experiment_from_the_cli() {
         "20",
     ]);
     assert_eq!(out.lines().count(), 4, "{out}");
+    let dir = tempfile::tempdir().unwrap();
+    let trace = dir.path().join("t.json");
+    let trace = trace.to_str().unwrap();
+    ok(&[
+        "run",
+        "--model",
+        "epidemic",
+        "--entities",
+        "300",
+        "--steps",
+        "20",
+        "--executor",
+        "virtual",
+        "--worlds",
+        "4",
+        "--trace",
+        trace,
+    ]);
+    let charts = dir.path().join("charts");
+    ok(&["plot", trace, "--out", charts.to_str().unwrap()]);
+    for svg in ["spacetime.svg", "territory.svg", "heatmap.svg"] {
+        let text = std::fs::read_to_string(charts.join(svg)).unwrap();
+        assert!(text.starts_with("<svg"), "{svg}");
+    }
     let out = ok(&["models"]);
     for name in ["rigid-bodies", "epidemic", "phold"] {
         assert!(out.contains(name), "{out}");

@@ -6,6 +6,7 @@ use crate::kernel::{KernelConfig, RollbackMode, ScheduleSpec};
 use crate::sim::{ModelReport, RunOptions};
 use crate::verify::{RunOutcome, VerifyOptions};
 use anyhow::{bail, Result};
+use std::path::Path;
 
 /// `run --model NAME`: runs the model and prints a summary ending with its hash (or the
 /// report as JSON).
@@ -15,8 +16,25 @@ pub fn run(
     options: &RunOptions,
     steps: u64,
     json: bool,
+    trace: Option<&Path>,
 ) -> Result<ModelReport> {
-    let report = model.run(size, options, steps)?;
+    if trace.is_some() && options.executor == crate::sim::ExecutorKind::Reference {
+        bail!("--trace records the Time Warp worlds, and the reference executor has none: add --executor virtual or --executor threaded");
+    }
+    if let Some(path) = trace {
+        // Refuse an unwritable target before the run, not after it.
+        super::atomic::AtomicFile::create(path)?;
+    }
+    let mut options = options.clone();
+    options.kernel.trace = trace.is_some();
+    let report = model.run(size, &options, steps)?;
+    if let (Some(path), Some(t)) = (trace, &report.trace) {
+        super::atomic::write(path, serde_json::to_string(t)?.as_bytes())?;
+        eprintln!(
+            "wrote the trace to {} (draw it with `plot`)",
+            path.display()
+        );
+    }
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(report);
@@ -160,6 +178,35 @@ pub fn granularity(
                 eff / n
             );
         }
+    }
+    Ok(())
+}
+
+/// `plot TRACE --out DIR`: the space-time diagram, the territory map and the rollback heat
+/// map of a trace written by `run --trace` (any model), as SVG files.
+pub fn plot(trace: &Path, out: &Path) -> Result<()> {
+    use anyhow::Context;
+    let text = std::fs::read_to_string(trace)
+        .with_context(|| format!("cannot read the trace {}", trace.display()))?;
+    let t: crate::kernel::RunTrace = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{} is not a trace written by `run --trace`",
+            trace.display()
+        )
+    })?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create the directory {}", out.display()))?;
+    for (name, draw) in [
+        (
+            "spacetime.svg",
+            super::charts::space_time as fn(&_, &Path) -> Result<()>,
+        ),
+        ("territory.svg", super::charts::territory_map),
+        ("heatmap.svg", super::charts::rollback_heat_map),
+    ] {
+        let path = out.join(name);
+        draw(&t, &path)?;
+        println!("wrote {}", path.display());
     }
     Ok(())
 }

@@ -29,6 +29,19 @@ enum Command {
     Verify(VerifyArgs),
     /// Rollback granularity: cell against world rollback per optimism window (CSV).
     Experiment(ExperimentArgs),
+    /// Draw a trace written by `run --trace` (space-time diagram, territory map, rollback
+    /// heat map, SVG).
+    Plot(PlotArgs),
+}
+
+#[derive(Debug, Args)]
+struct PlotArgs {
+    /// A trace written by `run --trace FILE`.
+    #[arg(value_name = "TRACE")]
+    trace: std::path::PathBuf,
+    /// Directory for the charts (created if missing).
+    #[arg(long, value_name = "DIR", default_value = ".")]
+    out: std::path::PathBuf,
 }
 
 /// Which model, its size and seed.
@@ -94,6 +107,10 @@ struct RunArgs {
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
+    /// Write the run's trace (LVT, rollbacks, GVT; virtual and threaded executors) as JSON,
+    /// for `plot`.
+    #[arg(long, value_name = "FILE")]
+    trace: Option<std::path::PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -191,7 +208,7 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                 kernel: a.kernel.config()?.mode(parse_mode(&a.mode)?),
                 threads: threads(a.threads),
             };
-            commands::run(m, &size, &options, a.steps, a.json).map(|_| ())
+            commands::run(m, &size, &options, a.steps, a.json, a.trace.as_deref()).map(|_| ())
         }
         Command::Verify(a) => {
             let (m, size) = model(registry, &a.model)?;
@@ -206,6 +223,7 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
             };
             commands::verify(m, &size, &options)
         }
+        Command::Plot(a) => commands::plot(&a.trace, &a.out),
         Command::Experiment(a) => {
             if a.name != "granularity" {
                 bail!(
@@ -266,6 +284,13 @@ pub fn run_with(
     registry: &Registry,
     args: impl IntoIterator<Item = std::ffi::OsString>,
 ) -> Result<()> {
-    let cli = ModelCli::try_parse_from(args).map_err(|e| anyhow!("{e}"))?;
-    dispatch(registry, cli)
+    match ModelCli::try_parse_from(args) {
+        Ok(cli) => dispatch(registry, cli),
+        Err(e) if !e.use_stderr() => {
+            // --help or --version: print it, and that is a success.
+            e.print()?;
+            Ok(())
+        }
+        Err(e) => Err(anyhow!("{e}")),
+    }
 }

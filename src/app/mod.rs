@@ -1,5 +1,6 @@
-//! A command line for any model: register your models and your own binary gets `run`,
-//! `verify`, `experiment granularity` and `models` for them (the `cli` feature).
+//! A command line for any model: register your models and your own binary gets `run`
+//! (with `--trace`), `verify`, `experiment granularity`, `plot` and `models` for them (the
+//! `cli` feature).
 //!
 //! ```no_run
 //! use soda::app::{main_with, ModelSize, Registry};
@@ -17,6 +18,8 @@
 //! The `soda` binary registers the example models ([`Registry::examples`]) besides its
 //! rigid-body scenes: `soda run --model epidemic`, `soda verify --model phold`.
 
+pub mod atomic;
+pub mod charts;
 pub mod commands;
 mod main;
 mod registry;

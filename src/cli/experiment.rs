@@ -5,10 +5,10 @@
 
 mod peak;
 
-use super::charts;
 use super::table::{csv_line, run_row};
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
+use soda::app::charts;
 use soda::exec::reference::ReferenceRun;
 use soda::frame::StatesWanted;
 use soda::kernel::trace::RunTrace;
@@ -113,7 +113,7 @@ fn write_csv(path: &Path, rows: &[Row]) -> Result<()> {
         }
         text.push_str(&csv_line(cols.iter().map(|c| &c.1)));
     }
-    super::atomic::write(path, text.as_bytes())
+    soda::app::atomic::write(path, text.as_bytes())
 }
 
 fn scene(name: &str, bodies: usize, seed: u64) -> Result<Scene> {
@@ -236,7 +236,7 @@ fn model_scalability(s: &Scene, steps: u64, measured: &[(f64, f64)], svg: &Path)
         flow.push((p as f64, pr.dataflow_speedup()));
     }
     let csv = svg.with_file_name("scalability-model.csv");
-    super::atomic::write(&csv, text.as_bytes())?;
+    soda::app::atomic::write(&csv, text.as_bytes())?;
     let chart = svg.with_file_name("scalability-model.svg");
     charts::line_chart(
         &chart,

@@ -3,8 +3,6 @@
 //! later commands (`verify`, benchmarks) and later `run` options (executor, worlds, threads,
 //! rollback mode, window, partition, schedule seed) slot in without reshaping the rest.
 
-mod atomic;
-mod charts;
 mod exec_args;
 mod experiment;
 mod interrupt;

@@ -1,8 +1,8 @@
 //! `soda plot`: charts of a trace written by `soda run --trace`.
 
-use super::charts;
 use anyhow::{Context, Result};
 use clap::Args;
+use soda::app::charts;
 use soda::kernel::RunTrace;
 use std::path::PathBuf;
 

@@ -10,8 +10,8 @@
 //! place when the run ends or is interrupted (then holding the whole frames recorded so
 //! far); on a write error nothing replaces the target.
 
-use super::atomic::AtomicFile;
 use anyhow::{Context, Result};
+use soda::app::atomic::AtomicFile;
 use soda::Body;
 use std::io::Write;
 use std::path::{Path, PathBuf};

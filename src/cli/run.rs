@@ -1,6 +1,5 @@
 //! `soda run`: run a scene and print a summary (or the report as JSON).
 
-use super::atomic::{self, AtomicFile};
 use super::exec_args::ExecutorArgs;
 use super::interrupt;
 use super::output::print;
@@ -10,6 +9,7 @@ use super::source::{Origin, SceneArgs};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use soda::app::atomic::{self, AtomicFile};
 use soda::frame::StatesWanted;
 use soda::sim::{run_scene, RunReport};
 use soda::{Body, Frame, RigidBodyModel};
@@ -377,7 +377,7 @@ fn write_territories(
         let parts = vec![WorldTrace::default(); k.worlds];
         let trace = RunTrace::merge(grid.dims, owners, parts, Vec::new());
         let path = dir.join(format!("territory-{step:06}.svg"));
-        super::charts::territory_map(&trace, &path)?;
+        soda::app::charts::territory_map(&trace, &path)?;
         written += 1;
     }
     let series = vec![(
@@ -388,7 +388,7 @@ fn write_territories(
             .collect::<Vec<_>>(),
     )];
     let imbalance = dir.join("imbalance.svg");
-    super::charts::line_chart(
+    soda::app::charts::line_chart(
         &imbalance,
         "Load imbalance at each balancing round",
         ("committed step", "max / mean load per step"),

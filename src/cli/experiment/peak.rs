@@ -3,10 +3,11 @@
 //! the peak over collisions before it — and how the optimism window W absorbs it: threaded
 //! runs for W = 1..64, timing every committed frame as the output stage receives it.
 
-use super::{charts, cores, f, scene, Row};
+use super::{cores, f, scene, Row};
 use anyhow::{bail, Context, Result};
 use parry3d::query;
 use parry3d::shape::{Ball, Cuboid, Shape as ParryShape};
+use soda::app::charts;
 use soda::exec::reference::{CellCost, ReferenceRun};
 use soda::frame::StatesWanted;
 use soda::grid::Grid;
@@ -190,7 +191,7 @@ fn write_profile(p: &Profile, w: &PeakWindow, svg: &Path, title: &str) -> Result
         cpu.push((t as f64, rt));
     }
     let csv = svg.with_file_name("peak-resistance-cost.csv");
-    super::super::atomic::write(&csv, text.as_bytes())?;
+    soda::app::atomic::write(&csv, text.as_bytes())?;
     let chart = svg.with_file_name("peak-resistance-cost.svg");
     charts::line_chart(
         &chart,
@@ -378,7 +379,7 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         ));
     }
     let model_path = svg.with_file_name("peak-resistance-model.csv");
-    super::super::atomic::write(&model_path, model_csv.as_bytes())?;
+    soda::app::atomic::write(&model_path, model_csv.as_bytes())?;
     println!("wrote {}", model_path.display());
     let series = |values: &[Vec<Vec<f64>>], what: &str| -> Vec<(String, Vec<(f64, f64)>)> {
         world_counts

@@ -1,10 +1,10 @@
 //! SVG charts of a run trace (plotters): the space-time diagram, the territory map and the
 //! rollback heat map. SVG needs no fonts installed, and any browser or paper tool opens it.
 
+use crate::kernel::RunTrace;
 use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use soda::kernel::RunTrace;
 use std::path::Path;
 
 /// Turns a plotters error (not always `Send`) into an error naming the chart.
