@@ -249,11 +249,13 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             F::pause(spins);
             spins = spins.saturating_add(1);
         }
-        let floor = if self.optimistic {
-            self.gvt.load()
-        } else {
-            let worlds: Vec<_> = self.worlds.iter().map(|m| m.lock()).collect();
-            1 + worlds.iter().map(|s| s.world.frontier()).max().unwrap_or(0)
+        // Conservative mode: every world stays locked until the input is in its inbox, so no
+        // world makes a state at the input's step known between the check and the delivery.
+        let locked: Option<Vec<_>> =
+            (!self.optimistic).then(|| self.worlds.iter().map(|m| m.lock()).collect());
+        let floor = match &locked {
+            None => self.gvt.load(),
+            Some(worlds) => 1 + worlds.iter().map(|s| s.world.frontier()).max().unwrap_or(0),
         };
         let checked = super::check_input::<M>(&self.grid, floor, step, &input);
         if checked.is_ok() {
@@ -269,6 +271,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
                 });
             }
         }
+        drop(locked);
         self.gvt_round.store(0);
         checked
     }
