@@ -219,3 +219,35 @@ fn the_event_type_is_the_models_own() {
         .unwrap();
     assert!(infections > 0);
 }
+
+#[test]
+fn a_run_resumed_from_saved_states_commits_the_uninterrupted_runs_bits_on_every_executor() {
+    let script = vec![(12, Input::Spawn(spawned(u64::MAX - 3)))];
+    let late = vec![(30, Input::Spawn(spawned(u64::MAX - 4)))];
+    let all: Vec<(Step, Input<Agent>)> = script.iter().chain(&late).cloned().collect();
+    let whole = hashes(&RunOptions::reference(), all, 45);
+    // The committed states of step 20 of the uninterrupted run, as a checkpoint would hold.
+    let (model, grid, initial) = epidemic();
+    let mut saved = Vec::new();
+    Runner::new(model, grid, initial)
+        .inputs(script)
+        .states(StatesWanted::at(20))
+        .run(20, |f, states, _| {
+            if f.step == 20 {
+                saved = states.unwrap().iter().map(|a| (*a).clone()).collect();
+            }
+        })
+        .unwrap();
+    for o in options() {
+        let (model, grid, _) = epidemic();
+        let mut got = Vec::new();
+        Runner::new(model, grid, saved.clone())
+            .options(o.clone())
+            .start_at(20)
+            .inputs(late.clone())
+            .run(25, |f, _, _| got.push((f.step, f.hash)))
+            .unwrap();
+        let expected: Vec<(u64, u64)> = (21..=45).zip(whole[20..].iter().copied()).collect();
+        assert_eq!(got, expected, "{:?}", o.executor);
+    }
+}

@@ -3,6 +3,7 @@
 //! rigid-body model has thin wrappers: [`run_scene`], [`Simulation`], and physics
 //! measurements of a state ([`StateReport`]).
 
+mod offset;
 mod options;
 mod report;
 mod rigid;

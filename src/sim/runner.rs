@@ -1,10 +1,11 @@
 //! One generic way to run any [`CellModel`] on any executor: [`Runner`] (and the shorthand
 //! [`run_model`]) returns one [`ModelReport`] or one [`ExecError`] whichever executor runs.
 
+use super::offset::Offset;
 use super::options::{ExecutorKind, RunOptions};
 use super::report::{KernelReport, ModelReport};
 use crate::exec::control::RunControl;
-use crate::exec::error::ExecError;
+use crate::exec::error::{ExecError, InputError};
 use crate::exec::reference::ReferenceRun;
 use crate::exec::sync::StdFacade;
 use crate::exec::threaded::{run_threaded_controlled, ThreadTimes, ThreadedSetup};
@@ -40,6 +41,7 @@ pub struct Runner<M: CellModel> {
     options: RunOptions,
     wanted: StatesWanted,
     check_contract: bool,
+    origin: Step,
 }
 
 impl<M: CellModel + 'static> Runner<M> {
@@ -54,7 +56,17 @@ impl<M: CellModel + 'static> Runner<M> {
             options: RunOptions::default(),
             wanted: StatesWanted::none(),
             check_contract: false,
+            origin: 0,
         }
+    }
+
+    /// Starts from states that are those of step `step` (not 0): the model sees the steps
+    /// `step, step + 1, …`, frames and events carry them, and inputs name them — so a run
+    /// resumed from the committed states of step `step` of an earlier run (saved, say, by a
+    /// sink that asked for them) commits that run's bits from there, on any executor.
+    pub fn start_at(mut self, step: Step) -> Self {
+        self.origin = step;
+        self
     }
 
     /// The executor, kernel configuration and threads.
@@ -102,6 +114,65 @@ impl<M: CellModel + 'static> Runner<M> {
         steps: u64,
         mut sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
     ) -> Result<ModelReport, ExecError> {
+        if self.origin == 0 {
+            return self.run_from_zero(steps, sink);
+        }
+        let origin = self.origin;
+        let mut inputs = Vec::with_capacity(self.inputs.len());
+        for (step, input) in self.inputs {
+            if step <= origin {
+                return Err(InputError::TooLate {
+                    step,
+                    earliest: origin + 1,
+                }
+                .into());
+            }
+            inputs.push((step - origin, input));
+        }
+        let asked = self.wanted.clone();
+        let shifted = Runner {
+            model: Offset {
+                inner: self.model,
+                origin,
+            },
+            grid: self.grid,
+            initial: self.initial,
+            inputs,
+            options: self.options,
+            wanted: shift_wanted(self.wanted, origin),
+            check_contract: self.check_contract,
+            origin: 0,
+        };
+        let mut report = shifted.run_from_zero(steps, |f, states, control| {
+            let mut frame = f.clone();
+            frame.step += origin;
+            for e in &mut frame.events {
+                e.step += origin;
+            }
+            let earliest = control.earliest_input_step() + origin;
+            let mut post = |step: Step, input: Input<M::State>| {
+                if step <= origin {
+                    return Err(InputError::TooLate { step, earliest });
+                }
+                control.input(step - origin, input)
+            };
+            let mut global = RunControl::new(earliest, &mut post);
+            let states = states.filter(|_| asked.wants(frame.step, frame.hash));
+            sink(&frame, states, &mut global);
+            if global.stopped() {
+                control.stop();
+            }
+        })?;
+        report.stopped_at = report.stopped_at.map(|s| s + origin);
+        Ok(report)
+    }
+
+    /// [`run`](Self::run) from step 0.
+    fn run_from_zero(
+        self,
+        steps: u64,
+        mut sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+    ) -> Result<ModelReport, ExecError> {
         let Runner {
             model,
             grid,
@@ -110,6 +181,7 @@ impl<M: CellModel + 'static> Runner<M> {
             options,
             wanted,
             check_contract,
+            origin: _,
         } = self;
         let mut tally = Tally::<M>::new(&grid, &initial);
         let start = Instant::now();
@@ -204,6 +276,23 @@ impl<M: CellModel + 'static> Runner<M> {
         let wall = start.elapsed().as_secs_f64();
         Ok(tally.report(&options, wall, &initial_events, kernel, trace))
     }
+}
+
+/// The steps `wanted` names (global) as the shifted run's local steps.
+fn shift_wanted(mut wanted: StatesWanted, origin: Step) -> StatesWanted {
+    wanted.step = wanted.step.and_then(|s| s.checked_sub(origin));
+    if wanted.every > 0 {
+        // Local step `t` is global `t + origin`: it is wanted when `(t + origin) % every == 0`,
+        // which a local `every` can say only when `origin` is a multiple of it.
+        if origin % wanted.every != 0 {
+            wanted.every = 1;
+        }
+    }
+    if let Some(expected) = &wanted.unexpected {
+        let local: Vec<u64> = expected.iter().skip(origin as usize).copied().collect();
+        wanted.unexpected = Some(std::sync::Arc::new(local));
+    }
+    wanted
 }
 
 /// Runs `model` from `initial` for `steps` steps with `options`, handing every committed
