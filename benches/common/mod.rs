@@ -4,7 +4,8 @@
 //! comparison are computed identically. Penetration is *exact*: parry3d's `query::contact`
 //! (GJK/EPA) between every pair of bodies whose bounding spheres overlap, and the lowest
 //! vertex (or the sphere's bottom) against the ground plane — never a solver's own manifold
-//! depths (DESIGN.md §10).
+//! depths (SPEC.md §5.4, measured behaviour: penetration is measured exactly, not read off a
+//! solver).
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use parry3d::query;
