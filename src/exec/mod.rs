@@ -49,6 +49,54 @@ pub(crate) fn check_input<M: CellModel>(
     Ok(())
 }
 
+/// The input message of number `seq` at `step` (destination world 0; copies go to every
+/// world).
+pub(crate) fn input_message<M: CellModel>(
+    grid: &Grid,
+    step: Step,
+    input: crate::kernel::Input<M::State>,
+    seq: u32,
+) -> crate::kernel::Message<M::State> {
+    let (removes, adds) = match input {
+        crate::kernel::Input::Spawn(s) => (Vec::new(), vec![s]),
+        crate::kernel::Input::Remove(id) => (vec![id], Vec::new()),
+        crate::kernel::Input::Replace(s) => (vec![M::id(&s)], vec![s]),
+    };
+    let bodies: Vec<(u32, M::State)> = adds
+        .into_iter()
+        .map(|s| {
+            let c = grid
+                .cell_of(M::position(&s))
+                .expect("checked inside the grid");
+            (grid.index(c) as u32, s)
+        })
+        .collect();
+    crate::kernel::Message {
+        step,
+        kind: crate::kernel::MessageKind::Input,
+        sign: crate::kernel::Sign::Positive,
+        src_world: WorldId::MAX,
+        dst_world: 0,
+        src_cell: u32::MAX,
+        seq,
+        bodies: bodies.into(),
+        removes,
+        follows: false,
+    }
+}
+
+/// Copies of the input message `msg`, one addressed to each of `worlds` worlds (an input is
+/// broadcast: every world applies the part that concerns its cells).
+pub(crate) fn to_every_world<S: Clone>(
+    msg: &crate::kernel::Message<S>,
+    worlds: usize,
+) -> impl Iterator<Item = crate::kernel::Message<S>> + '_ {
+    (0..worlds).map(move |w| crate::kernel::Message {
+        dst_world: w as WorldId,
+        ..msg.clone()
+    })
+}
+
 /// The committed frame of step `t` from every world's states (any order) and events: the
 /// states sorted by id and hashed as the reference hashes them, the events sorted. Returns
 /// the sorted states too ([`sorted_by_id`]).

@@ -33,7 +33,7 @@ use crate::grid::Grid;
 use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
 use crate::kernel::config::LoadSource;
 use crate::kernel::counters::Counters;
-use crate::kernel::message::{Input, Message, MessageKind, Sign};
+use crate::kernel::message::{Input, Message};
 use crate::kernel::partition::WorldId;
 use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::{ActionKind, World};
@@ -261,14 +261,11 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         if checked.is_ok() {
             let mut log = self.inputs.lock();
             log.count += 1;
-            let msg = input_message::<M>(&self.grid, step, input, log.count);
+            let msg = super::input_message::<M>(&self.grid, step, input, log.count);
             log.posted.push(msg.clone());
             drop(log);
-            for w in 0..self.worlds.len() {
-                self.send(Message {
-                    dst_world: w as WorldId,
-                    ..msg.clone()
-                });
+            for m in super::to_every_world(&msg, self.worlds.len()) {
+                self.send(m);
             }
         }
         drop(locked);
@@ -608,42 +605,6 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     }
 }
 
-/// The input message of number `seq` at `step` (destination world 0; copies go to every
-/// world).
-pub(crate) fn input_message<M: CellModel>(
-    grid: &Grid,
-    step: Step,
-    input: Input<M::State>,
-    seq: u32,
-) -> Message<M::State> {
-    let (removes, adds) = match input {
-        Input::Spawn(s) => (Vec::new(), vec![s]),
-        Input::Remove(id) => (vec![id], Vec::new()),
-        Input::Replace(s) => (vec![M::id(&s)], vec![s]),
-    };
-    let bodies: Vec<(u32, M::State)> = adds
-        .into_iter()
-        .map(|s| {
-            let c = grid
-                .cell_of(M::position(&s))
-                .expect("checked inside the grid");
-            (grid.index(c) as u32, s)
-        })
-        .collect();
-    Message {
-        step,
-        kind: MessageKind::Input,
-        sign: Sign::Positive,
-        src_world: WorldId::MAX,
-        dst_world: 0,
-        src_cell: u32::MAX,
-        seq,
-        bodies: bodies.into(),
-        removes,
-        follows: false,
-    }
-}
-
 /// Finishes committed step `t` from every world's contribution ([`super::whole_frame`]) and,
 /// if `wanted` asks for them, clones its sorted states.
 fn finish_frame<M: CellModel>(
@@ -913,12 +874,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
                 .filter(|m| m.step > committed)
                 .cloned()
                 .collect();
-            let reposted = pending.iter().flat_map(|m| {
-                (0..n).map(move |w| Message {
-                    dst_world: w as WorldId,
-                    ..m.clone()
-                })
-            });
+            let reposted = pending.iter().flat_map(|m| super::to_every_world(m, n));
             let started: Vec<Message<M::State>> =
                 locked.iter_mut().flat_map(|s| s.world.start()).collect();
             for m in started.into_iter().chain(reposted) {

@@ -47,7 +47,7 @@ use crate::kernel::config::RollbackMode;
 use crate::kernel::config::{KernelConfig, ScheduleSpec};
 use crate::kernel::counters::Counters;
 use crate::kernel::gvt::global_virtual_time;
-use crate::kernel::message::{Bodies, Input, Message, MessageKind, Sign};
+use crate::kernel::message::{Input, Message};
 use crate::kernel::partition::{Partition, WorldId};
 use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::World;
@@ -311,35 +311,10 @@ impl<M: CellModel> VirtualRun<M> {
 
     /// Posts a checked input.
     fn post_input(&mut self, step: Step, input: Input<M::State>) {
-        let (removes, adds) = match input {
-            Input::Spawn(s) => (Vec::new(), vec![s]),
-            Input::Remove(id) => (vec![id], Vec::new()),
-            Input::Replace(s) => (vec![M::id(&s)], vec![s]),
-        };
-        let bodies: Bodies<M::State> = adds
-            .into_iter()
-            .map(|s| {
-                let c = self.grid.cell_of(M::position(&s)).expect("checked inside");
-                (self.grid.index(c) as u32, s)
-            })
-            .collect::<Vec<_>>()
-            .into();
         self.inputs += 1;
-        let msgs: Vec<Message<M::State>> = (0..self.worlds.len() as WorldId)
-            .map(|w| Message {
-                step,
-                kind: MessageKind::Input,
-                sign: Sign::Positive,
-                src_world: WorldId::MAX,
-                dst_world: w,
-                src_cell: u32::MAX,
-                seq: self.inputs,
-                bodies: bodies.clone(),
-                removes: removes.clone(),
-                follows: false,
-            })
-            .collect();
-        self.inputs_posted.push(msgs[0].clone());
+        let msg = super::input_message::<M>(&self.grid, step, input, self.inputs);
+        let msgs = super::to_every_world(&msg, self.worlds.len()).collect();
+        self.inputs_posted.push(msg);
         self.deliver_inputs(msgs);
     }
 
@@ -419,12 +394,7 @@ impl<M: CellModel> VirtualRun<M> {
                 .cloned()
                 .collect();
             for m in pending {
-                let copies = (0..self.worlds.len() as WorldId)
-                    .map(|w| Message {
-                        dst_world: w,
-                        ..m.clone()
-                    })
-                    .collect();
+                let copies = super::to_every_world(&m, self.worlds.len()).collect();
                 self.deliver_inputs(copies);
             }
         }
