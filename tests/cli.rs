@@ -2,45 +2,9 @@
 //! recording, scene dumps, and clear non-zero exits on bad input. Runs are kept tiny.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod cli_support;
 
-fn soda(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_soda"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("the soda binary runs")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8(o.stdout.clone()).expect("stdout is UTF-8")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8(o.stderr.clone()).expect("stderr is UTF-8")
-}
-
-/// Runs `soda args` and expects success; returns stdout.
-fn ok(args: &[&str]) -> String {
-    let o = soda(args);
-    assert!(
-        o.status.success(),
-        "soda {args:?} failed ({}):\n{}",
-        o.status,
-        stderr(&o)
-    );
-    stdout(&o)
-}
-
-/// Runs `soda args` and expects exit status 1 with an error message; returns stderr.
-fn fails(args: &[&str]) -> String {
-    let o = soda(args);
-    let err = stderr(&o);
-    assert_eq!(o.status.code(), Some(1), "soda {args:?}: {err}");
-    assert!(err.starts_with("error: "), "soda {args:?}: {err}");
-    assert!(!err.contains("panicked"), "soda {args:?} panicked: {err}");
-    err
-}
+use cli_support::{fails, ok, soda, stderr, stdout};
 
 fn is_hash(s: &str) -> bool {
     s.len() == 16

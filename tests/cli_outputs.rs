@@ -2,44 +2,12 @@
 //! before step 1, files renamed into place whole, the summary and hash printed even when a
 //! write fails, Ctrl-C keeping whole recorded frames, and the messages of bad numbers.
 
+mod cli_support;
+
+use cli_support::{fails, soda, stderr, stdout, usage_error};
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-fn soda(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_soda"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("the soda binary runs")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Runs `soda args`, expects exit status 1 and returns stderr.
-fn fails(args: &[&str]) -> String {
-    let o = soda(args);
-    let err = stderr(&o);
-    assert_eq!(o.status.code(), Some(1), "soda {args:?}: {err}");
-    assert!(err.starts_with("error: "), "soda {args:?}: {err}");
-    assert!(!err.contains("panicked"), "soda {args:?} panicked: {err}");
-    err
-}
-
-/// Runs `soda args`, expects a usage error (status 2) and returns stderr.
-fn usage_error(args: &[&str]) -> String {
-    let o = soda(args);
-    let err = stderr(&o);
-    assert_eq!(o.status.code(), Some(2), "soda {args:?}: {err}");
-    assert!(!err.contains("panicked"), "soda {args:?} panicked: {err}");
-    err
-}
 
 /// A run long enough to notice if it is computed: the checks must refuse before step 1.
 const LONG: &[&str] = &["run", "--objects", "1000", "--steps", "100000"];

@@ -146,8 +146,8 @@ pub fn run_scene(
 
 /// [`run_scene`] with inputs scheduled before the run and a sink that also gets a
 /// [`RunControl`] (schedule inputs during the run, or stop it). A stopped run's `last`
-/// measures the last committed state the sink was handed states of (the initial state if
-/// none; `last.step` says which), its `hash` is the last committed step's.
+/// measures the state of the step it stopped at if `wanted` asked for it, else the initial
+/// state (`last.step` says which); its `hash` is the last committed step's.
 pub fn run_scene_controlled(
     scene: &Scene,
     options: &RunOptions,
@@ -166,11 +166,15 @@ pub fn run_scene_controlled(
         .inputs(inputs)
         .states(want)
         .run(steps, |f, states, control| {
-            if let Some(s) = states {
-                latest = Some((f.step, s.iter().map(|b| (*b).clone()).collect()));
-            }
             let user_wants = wanted.wants(f.step, f.hash);
             sink(f, if user_wants { states } else { None }, control);
+            // Only the state the report measures is copied: the last step's, or the step
+            // the sink stopped at (if its states were handed over).
+            if f.step == steps || control.stopped() {
+                if let Some(s) = states {
+                    latest = Some((f.step, s.iter().map(|b| (*b).clone()).collect()));
+                }
+            }
         })?;
     let mut ignored = Vec::new();
     let (step, bodies) = latest.unwrap_or_else(|| (0, scene.initial_bodies()));
