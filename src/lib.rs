@@ -84,6 +84,7 @@
 
 #[cfg(feature = "cli")]
 pub mod app;
+pub mod checkpoint;
 pub mod divergence;
 pub mod exec;
 pub mod frame;

@@ -3,6 +3,7 @@
 //! later commands (`verify`, benchmarks) and later `run` options (executor, worlds, threads,
 //! rollback mode, window, partition, schedule seed) slot in without reshaping the rest.
 
+mod checkpoint;
 mod exec_args;
 mod experiment;
 mod interrupt;
@@ -11,13 +12,14 @@ mod output;
 mod plan;
 mod plot;
 mod record;
+mod resume;
 mod run;
 mod scenes;
 mod source;
 mod table;
 mod verify;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use std::process::ExitCode;
 
 /// SODA: deterministic optimistic (Time Warp) parallel rigid-body simulation.
@@ -43,6 +45,10 @@ enum Command {
     /// reference executor.
     #[command(after_help = run::AFTER_HELP, allow_negative_numbers = true)]
     Run(Box<run::RunArgs>),
+    /// Continue a run from a checkpoint (`soda run --checkpoint FILE`) to the same final hash
+    /// as the uninterrupted run, on any executor.
+    #[command(after_help = resume::AFTER_HELP, allow_negative_numbers = true)]
+    Resume(Box<resume::ResumeArgs>),
     /// List the built-in scenes, or print one as a TOML scene file to start your own from.
     #[command(after_help = scenes::AFTER_HELP, allow_negative_numbers = true)]
     Scenes(scenes::ScenesArgs),
@@ -94,15 +100,27 @@ pub fn main() -> ExitCode {
     // Another model than rigid bodies: the generic command line over the example models.
     let result = match model_arg(&args) {
         Some(m) if m != RIGID_BODIES => soda::app::run_with(&soda::app::Registry::examples(), args),
-        _ => run_rigid(Cli::parse_from(args)),
+        _ => {
+            let matches = Cli::command().get_matches_from(args);
+            match Cli::from_arg_matches(&matches) {
+                Ok(cli) => run_rigid(cli, &matches),
+                Err(e) => e.exit(),
+            }
+        }
     };
     report(result)
 }
 
-/// Runs a command of the rigid-body command line.
-fn run_rigid(cli: Cli) -> anyhow::Result<()> {
+/// Runs a command of the rigid-body command line (`matches` are the parsed command line,
+/// for commands that tell given options from defaults).
+fn run_rigid(cli: Cli, matches: &clap::ArgMatches) -> anyhow::Result<()> {
     match cli.command {
         Command::Run(args) => run::run(&args),
+        Command::Resume(args) => {
+            let empty = clap::ArgMatches::default();
+            let sub = matches.subcommand_matches("resume").unwrap_or(&empty);
+            resume::resume(&args, sub)
+        }
         Command::Scenes(args) => scenes::scenes(&args),
         Command::Verify(args) => verify::verify(&args),
         Command::Plot(args) => plot::plot(&args),

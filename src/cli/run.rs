@@ -1,5 +1,8 @@
 //! `soda run`: run a scene and print a summary (or the report as JSON).
 
+use super::checkpoint::{
+    CheckpointArgs, CheckpointWriter, EventTotals, RunDescription, SceneSource,
+};
 use super::exec_args::ExecutorArgs;
 use super::interrupt;
 use super::output::print;
@@ -11,10 +14,10 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::app::atomic::{self, AtomicFile};
 use soda::frame::StatesWanted;
-use soda::sim::{run_scene, RunReport};
-use soda::{Body, Frame, RigidBodyModel};
+use soda::sim::{run_scene_from, ExecutorKind, ResumeFrom, RunOptions, RunReport};
+use soda::{Body, Frame, RigidBodyModel, Scene};
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Examples shown after `soda run --help`.
 pub const AFTER_HELP: &str = "\
@@ -56,6 +59,9 @@ pub struct RunArgs {
 
     #[command(flatten)]
     pub output: OutputArgs,
+
+    #[command(flatten)]
+    pub checkpoint: CheckpointArgs,
 }
 
 /// Options about what a run writes.
@@ -115,18 +121,26 @@ struct Outputs {
 }
 
 impl Outputs {
-    /// Checks every output path of `args` against each other and the scene file and opens
-    /// what can be opened; nothing is computed yet.
-    fn plan(args: &RunArgs, steps: u64) -> Result<Outputs> {
-        let out = &args.output;
+    /// Checks every output path of `out` (and the checkpoint file, if any) against each
+    /// other and the scene file, and opens what can be opened; nothing is computed yet.
+    fn plan(
+        out: &OutputArgs,
+        scene_file: Option<&Path>,
+        checkpoint: Option<&Path>,
+        last_step: u64,
+    ) -> Result<(Outputs, Option<PathBuf>)> {
         let mut plan = OutputPlan::new();
-        if let Some(scene) = args.scene.file() {
+        if let Some(scene) = scene_file {
             plan.input("the scene file", scene);
         }
+        let checkpoint = match checkpoint {
+            Some(path) => Some(plan.file("--checkpoint", path)?),
+            None => None,
+        };
         let record = match &out.record {
             Some(path) => {
                 let target = plan.file("--record", path)?;
-                Some(Recorder::create(&target, out.record_every, steps)?)
+                Some(Recorder::create(&target, out.record_every, last_step)?)
             }
             None => None,
         };
@@ -150,21 +164,83 @@ impl Outputs {
             Some(dir) => Some(plan.dir("--territories", dir)?),
             None => None,
         };
-        Ok(Outputs {
+        let outputs = Outputs {
             record,
             counters,
             trace,
             csv,
             territories,
-        })
+        };
+        Ok((outputs, checkpoint))
     }
+}
+
+/// One run of a scene, fresh (`soda run`) or resumed from a checkpoint (`soda resume`).
+pub(super) struct Job<'a> {
+    /// The scene (its model and grid; its bodies unless `from` is given).
+    pub scene: Scene,
+    /// Where the scene came from, for the summary.
+    pub origin: Origin,
+    /// How to rebuild the scene, for checkpoints.
+    pub source: SceneSource,
+    /// The scene file to protect from being overwritten, if the scene is a file.
+    pub scene_file: Option<PathBuf>,
+    /// Executor and kernel options.
+    pub options: RunOptions,
+    /// The committed bodies to start from (a resume), or `None` for the scene's bodies.
+    pub from: Option<ResumeFrom>,
+    /// Events of the steps before `from` (a resume).
+    pub events_before: EventTotals,
+    /// The step to reach.
+    pub last_step: u64,
+    /// What to write.
+    pub output: &'a OutputArgs,
+    /// Checkpoints: the file and the steps between them.
+    pub checkpoint: Option<(PathBuf, u64)>,
+    /// The checkpoint this run resumed from, for the summary.
+    pub resumed_from: Option<PathBuf>,
 }
 
 /// Runs the command.
 pub fn run(args: &RunArgs) -> Result<()> {
-    let mut options = args.executor.options()?;
-    if args.output.trace.is_some() {
-        if options.executor == soda::sim::ExecutorKind::Reference {
+    let options = args.executor.options()?;
+    let (scene, origin, source) = args.scene.load_with_source()?;
+    execute(Job {
+        scene,
+        origin,
+        source,
+        scene_file: args.scene.file().map(Path::to_path_buf),
+        options,
+        from: None,
+        events_before: EventTotals::default(),
+        last_step: args.steps,
+        output: &args.output,
+        checkpoint: args
+            .checkpoint
+            .checkpoint
+            .clone()
+            .map(|p| (p, args.checkpoint.checkpoint_every)),
+        resumed_from: None,
+    })
+}
+
+/// Runs a job: checks every output, runs, writes the outputs and prints the summary.
+pub(super) fn execute(job: Job<'_>) -> Result<()> {
+    let Job {
+        scene,
+        origin,
+        source,
+        scene_file,
+        mut options,
+        from,
+        mut events_before,
+        last_step,
+        output,
+        checkpoint,
+        resumed_from,
+    } = job;
+    if output.trace.is_some() {
+        if options.executor == ExecutorKind::Reference {
             bail!(
                 "--trace records the Time Warp kernel's worlds, and the reference executor has \
                  none; add --executor virtual or --executor threaded"
@@ -172,20 +248,54 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
         options.kernel.trace = true;
     }
-    if args.output.territories.is_some() && options.executor == soda::sim::ExecutorKind::Reference {
+    if output.territories.is_some() && options.executor == ExecutorKind::Reference {
         bail!(
             "--territories draws the Time Warp worlds' territories, and the reference executor \
              has none; add --executor virtual or --executor threaded"
         );
     }
-    let (scene, origin) = args.scene.load()?;
-    let initial_bodies = scene.bodies.len();
+    let first_step = from.as_ref().map_or(0, |f| f.step);
+    if last_step < first_step {
+        bail!(
+            "--steps {last_step} is before the checkpoint's step {first_step}: give --steps \
+             {first_step} or more"
+        );
+    }
+    let steps = last_step - first_step;
+    let grid = scene.grid();
+    // The bodies at the first step: the scene's inside the grid, or the checkpoint's.
+    let mut initial: Vec<Body> = match &from {
+        Some(f) => f.bodies.clone(),
+        None => {
+            let all = scene.initial_bodies();
+            let count = all.len();
+            let inside: Vec<Body> = all
+                .into_iter()
+                .filter(|b| {
+                    grid.cell_of(<RigidBodyModel as soda::CellModel>::position(b))
+                        .is_some()
+                })
+                .collect();
+            events_before.left_domain += count - inside.len();
+            inside
+        }
+    };
+    initial.sort_by_key(|b| b.id);
+    let initial_bodies = match &from {
+        Some(f) => f.bodies.len(),
+        None => scene.bodies.len(),
+    };
     // Before any temporary file exists: from here Ctrl-C stops at the next committed step
     // (or, pressed twice, at once), never leaving a temporary file behind.
     if let Err(e) = interrupt::install() {
         eprintln!("warning: Ctrl-C will not stop the run cleanly: {e}");
     }
-    let outputs = Outputs::plan(args, args.steps)?;
+    let (outputs, checkpoint_path) = Outputs::plan(
+        output,
+        scene_file.as_deref(),
+        checkpoint.as_ref().map(|c| c.0.as_path()),
+        last_step,
+    )?;
     let Outputs {
         mut record,
         counters,
@@ -193,45 +303,92 @@ pub fn run(args: &RunArgs) -> Result<()> {
         csv,
         territories,
     } = outputs;
+    let mut checkpoints = match (checkpoint_path, &checkpoint) {
+        (Some(path), Some((_, every))) => Some(CheckpointWriter::new(
+            path,
+            RunDescription {
+                scene: source,
+                // What a resume runs on; tracing is this run's output option, not the run's.
+                options: RunOptions {
+                    kernel: soda::kernel::KernelConfig {
+                        trace: false,
+                        ..options.kernel.clone()
+                    },
+                    ..options.clone()
+                },
+                last_step,
+                checkpoint_every: *every,
+                events: events_before,
+            },
+        )),
+        _ => None,
+    };
     let mut wanted = StatesWanted::none();
     if let Some(r) = record.as_mut() {
-        let estimate = super::record::estimated_bytes(
-            initial_bodies as u64,
-            args.steps,
-            args.output.record_every,
-        );
-        if let Some(path) = &args.output.record {
+        let estimate =
+            super::record::estimated_bytes(initial.len() as u64, steps, output.record_every);
+        if let Some(path) = &output.record {
             super::record::warn_if_large(path, estimate);
         }
-        let grid = scene.grid();
-        let mut initial: Vec<Body> = scene
-            .initial_bodies()
-            .into_iter()
-            .filter(|b| {
-                grid.cell_of(<RigidBodyModel as soda::CellModel>::position(b))
-                    .is_some()
-            })
-            .collect();
-        initial.sort_by_key(|b| b.id);
-        r.frame_always(0, &initial.iter().collect::<Vec<_>>());
+        r.frame_always(first_step, &initial.iter().collect::<Vec<_>>());
         wanted = r.wanted();
     }
-    let progress = progress_bar(args, initial_bodies);
-    let report = run_scene(&scene, &options, args.steps, &wanted, |frame, states| {
-        if let (Some(r), Some(states)) = (record.as_mut(), states) {
-            r.frame(frame.step, states);
-        }
-        progress.inc(1);
-        if interrupt::requested() {
-            progress.finish_and_clear();
-            interrupted(frame, record.take(), args.output.record.as_deref());
-        }
-    })
+    if let Some(c) = &checkpoints {
+        // States of the steps either output wants: every step that is a multiple of
+        // both periods' greatest common divisor (each output picks its own steps).
+        wanted.every = gcd(wanted.every, c.every());
+        wanted.step = Some(last_step);
+    }
+    let progress = progress_bar(output.json, steps, initial.len());
+    let from = from.map(|f| ResumeFrom {
+        step: f.step,
+        bodies: initial,
+    });
+    let mut checkpoint_error: Option<anyhow::Error> = None;
+    let report = run_scene_from(
+        &scene,
+        &options,
+        from,
+        steps,
+        &wanted,
+        Vec::new(),
+        |frame, states, _control| {
+            if let (Some(r), Some(states)) = (record.as_mut(), states) {
+                r.frame(frame.step, states);
+            }
+            if let Some(c) = checkpoints.as_mut() {
+                if checkpoint_error.is_none() {
+                    if let Err(e) = c.frame(frame, states) {
+                        checkpoint_error = Some(e);
+                    }
+                }
+            }
+            progress.inc(1);
+            if interrupt::requested() {
+                progress.finish_and_clear();
+                interrupted(
+                    frame,
+                    record.take(),
+                    output.record.as_deref(),
+                    checkpoints.as_ref(),
+                );
+            }
+        },
+    )
     .with_context(|| format!("the {} executor failed", options.executor.name()))?;
     progress.finish_and_clear();
     // From here on a failed write does not lose the run: the summary and hash are printed
     // first, then the errors.
     let mut failures: Vec<anyhow::Error> = Vec::new();
+    if let Some(e) = checkpoint_error {
+        failures.push(e.context(format!(
+            "--checkpoint: a checkpoint was not written (the last whole one is at step {})",
+            checkpoints
+                .as_ref()
+                .and_then(CheckpointWriter::last_written)
+                .map_or("none".into(), |s| s.to_string())
+        )));
+    }
     let recorded = match record.map(Recorder::finish) {
         Some(Ok((_, frames))) => Some(frames),
         Some(Err(e)) => {
@@ -240,8 +397,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
         None => None,
     };
+    let mut report = report;
+    report.speed_capped_events += events_before.speed_capped;
+    report.left_domain_events += events_before.left_domain;
     // The report as JSON, formatted once for --json and --counters.
-    let report_json = if args.output.json || counters.is_some() {
+    let report_json = if output.json || counters.is_some() {
         let text = serde_json::to_string_pretty(&report).context("cannot format the report")?;
         text + "\n"
     } else {
@@ -270,21 +430,42 @@ pub fn run(args: &RunArgs) -> Result<()> {
             failures.push(e.context("--territories: the maps were not all written"));
         }
     }
-    if args.output.json {
+    if output.json {
         print(&report_json)?;
     } else {
         let recorded = recorded.and_then(|frames| {
-            let path = args.output.record.as_ref()?;
+            let path = output.record.as_ref()?;
             Some(format!("{frames} frames to {}", path.display()))
         });
+        let checkpointed = checkpoints.as_ref().and_then(|c| {
+            let step = c.last_written()?;
+            Some(format!("{} at step {step}", c.path().display()))
+        });
+        let resumed = resumed_from
+            .as_ref()
+            .map(|p| format!("from {} at step {first_step}", p.display()));
         print(&summary(
             &report,
             &origin,
             initial_bodies,
-            recorded.as_deref(),
+            Extras {
+                recorded: recorded.as_deref(),
+                checkpoint: checkpointed.as_deref(),
+                resumed: resumed.as_deref(),
+                first_step,
+            },
         ))?;
     }
     write_failures(failures)
+}
+
+/// The greatest common divisor, with `gcd(0, n) = n`.
+fn gcd(a: u64, b: u64) -> u64 {
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
 }
 
 /// Writes `text` to `file` and renames it into place.
@@ -321,12 +502,22 @@ fn interrupted(
     frame: &Frame<soda::EventKind>,
     record: Option<Recorder>,
     path: Option<&std::path::Path>,
+    checkpoints: Option<&CheckpointWriter>,
 ) -> ! {
     let mut note = format!(
         "interrupted at step {}, hash {}",
         frame.step,
         soda::hash::hex(frame.hash)
     );
+    if let Some(c) = checkpoints {
+        note += &match c.last_written() {
+            Some(step) => format!(
+                "; `soda resume {}` continues from step {step}",
+                c.path().display()
+            ),
+            None => "; no checkpoint was written yet".to_string(),
+        };
+    }
     if let (Some(r), Some(path)) = (record, path) {
         let last = r.last_recorded();
         match r.finish() {
@@ -404,12 +595,12 @@ fn write_territories(
 
 /// A progress bar on stderr when stderr is a terminal, the output is not JSON and the run is
 /// long enough to be worth one; otherwise a hidden bar.
-fn progress_bar(args: &RunArgs, bodies: usize) -> ProgressBar {
-    let work = args.steps.saturating_mul(bodies.max(1) as u64);
-    if args.output.json || work < 200_000 || !std::io::stderr().is_terminal() {
+fn progress_bar(json: bool, steps: u64, bodies: usize) -> ProgressBar {
+    let work = steps.saturating_mul(bodies.max(1) as u64);
+    if json || work < 200_000 || !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();
     }
-    let bar = ProgressBar::with_draw_target(Some(args.steps), ProgressDrawTarget::stderr());
+    let bar = ProgressBar::with_draw_target(Some(steps), ProgressDrawTarget::stderr());
     if let Ok(style) =
         ProgressStyle::with_template("{bar:40} step {pos}/{len}  {elapsed} elapsed, eta {eta}")
     {
@@ -428,27 +619,46 @@ fn num(x: f64) -> String {
     }
 }
 
+/// What the summary says besides the report.
+struct Extras<'a> {
+    /// Frames recorded and where.
+    recorded: Option<&'a str>,
+    /// The last checkpoint written and where.
+    checkpoint: Option<&'a str>,
+    /// The checkpoint the run resumed from.
+    resumed: Option<&'a str>,
+    /// The step the run started at (0 unless resumed).
+    first_step: u64,
+}
+
 /// The human summary. Its last line is `hash <16 hex digits>`.
-fn summary(
-    r: &RunReport,
-    origin: &Origin,
-    initial_bodies: usize,
-    recorded: Option<&str>,
-) -> String {
+fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras<'_>) -> String {
+    let start = if extras.first_step == 0 {
+        "at the start".to_string()
+    } else {
+        format!("at step {}", extras.first_step)
+    };
+    let steps = if extras.first_step == 0 {
+        format!("{}", r.steps)
+    } else if r.steps == 0 {
+        format!("none after step {}", extras.first_step)
+    } else {
+        format!(
+            "{} to {}",
+            extras.first_step + 1,
+            extras.first_step + r.steps
+        )
+    };
     let mut lines = vec![
         ("scene", format!("{} ({origin})", r.scene)),
         (
             "bodies",
-            format!(
-                "{initial_bodies} at the start, {} at the end",
-                r.last.bodies
-            ),
+            format!("{initial_bodies} {start}, {} at the end", r.last.bodies),
         ),
         (
             "steps",
             format!(
-                "{} of {} s = {} simulated s ({} executor)",
-                r.steps,
+                "{steps} of {} s = {} simulated s ({} executor)",
                 num(r.dt as f64),
                 num(r.steps as f64 * r.dt as f64),
                 r.executor
@@ -557,8 +767,14 @@ fn summary(
             ));
         }
     }
-    if let Some(rec) = recorded {
+    if let Some(resumed) = extras.resumed {
+        lines.push(("resumed", resumed.to_string()));
+    }
+    if let Some(rec) = extras.recorded {
         lines.push(("recorded", rec.to_string()));
+    }
+    if let Some(c) = extras.checkpoint {
+        lines.push(("checkpoint", c.to_string()));
     }
     lines.push(("hash", r.hash.clone()));
     lines

@@ -1,10 +1,11 @@
 //! Which scene to load: a built-in by name (sized by `--objects`, seeded by `--seed`) or a
 //! scene file (`.toml` / `.json`).
 
+use super::checkpoint::SceneSource;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use soda::scene::builtin::{builtin, BUILTINS};
-use soda::scene::{load_scene_file, SceneFormat};
+use soda::scene::{parse_scene, SceneFormat};
 use soda::{Scene, SceneError};
 use std::path::{Path, PathBuf};
 
@@ -55,10 +56,11 @@ impl SceneArgs {
         SceneFormat::from_path(path).map(|_| path)
     }
 
-    /// Loads and validates the scene these options name.
-    pub fn load(&self) -> Result<(Scene, Origin)> {
+    /// Loads and validates the scene these options name, with the source a checkpoint needs
+    /// to rebuild it (a file's text is read once, for both).
+    pub fn load_with_source(&self) -> Result<(Scene, Origin, SceneSource)> {
         let path = Path::new(&self.scene);
-        if SceneFormat::from_path(path).is_some() {
+        if let Some(format) = SceneFormat::from_path(path) {
             if let Some(n) = self.objects {
                 bail!(
                     "--objects {n} applies to built-in scenes only, but --scene `{}` is a scene file: \
@@ -66,12 +68,23 @@ impl SceneArgs {
                     self.scene
                 );
             }
-            let mut scene = load_scene_file(path)
-                .with_context(|| format!("cannot load scene file `{}`", self.scene))?;
+            let context = || format!("cannot load scene file `{}`", self.scene);
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| SceneError::Io {
+                    path: self.scene.clone(),
+                    reason: e.to_string(),
+                })
+                .with_context(context)?;
+            let mut scene = parse_scene(&text, format, &self.scene).with_context(context)?;
             if let Some(seed) = self.seed {
                 scene.seed = seed;
             }
-            return Ok((scene, Origin::File(path.to_path_buf())));
+            let source = SceneSource::File {
+                path: self.scene.clone(),
+                text,
+                seed: self.seed,
+            };
+            return Ok((scene, Origin::File(path.to_path_buf()), source));
         }
         if !BUILTINS.iter().any(|b| b.name == self.scene) && path.exists() {
             bail!(
@@ -92,6 +105,17 @@ impl SceneArgs {
             anyhow::Error::new(e).context(context)
         })?;
         let objects = scene.bodies.len();
-        Ok((scene, Origin::Builtin { objects, seed }))
+        let source = SceneSource::Builtin {
+            name: self.scene.clone(),
+            objects: self.objects,
+            seed,
+        };
+        Ok((scene, Origin::Builtin { objects, seed }, source))
+    }
+
+    /// Loads and validates the scene these options name.
+    pub fn load(&self) -> Result<(Scene, Origin)> {
+        self.load_with_source()
+            .map(|(scene, origin, _)| (scene, origin))
     }
 }

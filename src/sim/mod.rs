@@ -12,6 +12,7 @@ mod runner;
 pub use options::{ExecutorKind, RunOptions, UnknownExecutor};
 pub use report::{KernelReport, ModelReport};
 pub use rigid::{
-    measure, measure_state, run_scene, run_scene_controlled, RunReport, Simulation, StateReport,
+    measure, measure_state, run_scene, run_scene_controlled, run_scene_from, ResumeFrom, RunReport,
+    Simulation, StateReport,
 };
 pub use runner::{run_model, Runner};

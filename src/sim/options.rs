@@ -1,12 +1,12 @@
 //! How to run a model: the executor, the kernel configuration and the thread count.
 
 use crate::kernel::KernelConfig;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
 /// Which executor runs a model (SPEC.md §8, §9, §10): all three commit the same bits.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ExecutorKind {
     /// One thread, no worlds: the oracle.
@@ -63,7 +63,7 @@ impl FromStr for ExecutorKind {
 
 /// How to run a model: the executor, the kernel configuration (ignored by the reference)
 /// and the thread count (threaded executor only).
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct RunOptions {
     /// The executor.
     pub executor: ExecutorKind,

@@ -154,15 +154,50 @@ pub fn run_scene_controlled(
     steps: u64,
     wanted: &StatesWanted,
     inputs: Vec<(Step, Input<Body>)>,
+    sink: impl FnMut(&Frame<EventKind>, Option<&[&Body]>, &mut RunControl<'_, Body>),
+) -> Result<RunReport, ExecError> {
+    run_scene_from(scene, options, None, steps, wanted, inputs, sink)
+}
+
+/// Where a resumed scene run starts: the committed bodies of step `step` of an earlier run
+/// of the same scene (read from a checkpoint, say).
+#[derive(Clone, Debug)]
+pub struct ResumeFrom {
+    /// The committed step the bodies belong to.
+    pub step: Step,
+    /// The bodies at that step.
+    pub bodies: Vec<Body>,
+}
+
+/// [`run_scene_controlled`] from the committed bodies of a later step than 0 (`from`), or
+/// from the scene's own bodies (`None`): runs the steps `from.step + 1 ..= from.step +
+/// steps`, which commit the uninterrupted run's bits on any executor (the scene supplies the
+/// model and the grid; [`Runner::start_at`]). Frames, `wanted` and inputs name global steps.
+pub fn run_scene_from(
+    scene: &Scene,
+    options: &RunOptions,
+    from: Option<ResumeFrom>,
+    steps: u64,
+    wanted: &StatesWanted,
+    inputs: Vec<(Step, Input<Body>)>,
     mut sink: impl FnMut(&Frame<EventKind>, Option<&[&Body]>, &mut RunControl<'_, Body>),
 ) -> Result<RunReport, ExecError> {
     let model = scene.model();
     let grid = scene.grid();
+    let ResumeFrom {
+        step: origin,
+        bodies: initial,
+    } = from.unwrap_or_else(|| ResumeFrom {
+        step: 0,
+        bodies: scene.initial_bodies(),
+    });
+    let last_step = origin + steps;
     let mut want = wanted.clone();
-    want.step = Some(steps);
+    want.step = Some(last_step);
     let mut latest: Option<(Step, Vec<Body>)> = None;
-    let report = Runner::new(model.clone(), grid.clone(), scene.initial_bodies())
+    let report = Runner::new(model.clone(), grid.clone(), initial.clone())
         .options(options.clone())
+        .start_at(origin)
         .inputs(inputs)
         .states(want)
         .run(steps, |f, states, control| {
@@ -170,14 +205,14 @@ pub fn run_scene_controlled(
             sink(f, if user_wants { states } else { None }, control);
             // Only the state the report measures is copied: the last step's, or the step
             // the sink stopped at (if its states were handed over).
-            if f.step == steps || control.stopped() {
+            if f.step == last_step || control.stopped() {
                 if let Some(s) = states {
                     latest = Some((f.step, s.iter().map(|b| (*b).clone()).collect()));
                 }
             }
         })?;
     let mut ignored = Vec::new();
-    let (step, bodies) = latest.unwrap_or_else(|| (0, scene.initial_bodies()));
+    let (step, bodies) = latest.unwrap_or((origin, initial));
     let final_state = CellStates::binned::<RigidBodyModel>(&grid, bodies, step, &mut ignored);
     let last = measure_state(step, &final_state, &grid, &model);
     let count = |k: EventKind| report.events.get(k.name()).copied().unwrap_or(0) as usize;

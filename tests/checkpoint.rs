@@ -1,0 +1,259 @@
+//! Checkpoint and resume (`soda run --checkpoint`, `soda resume`): a resumed run ends with
+//! the uninterrupted run's hash on every executor, even after `kill -9` at random moments
+//! (during a checkpoint write too), and a damaged, edited or foreign file is refused.
+
+mod cli_support;
+
+use cli_support::{fails, ok, stderr};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The `hash` line's value of a summary.
+fn hash_of(summary: &str) -> String {
+    summary
+        .lines()
+        .find_map(|l| l.strip_prefix("hash"))
+        .map(|h| h.trim().to_string())
+        .unwrap_or_else(|| panic!("no hash line in:\n{summary}"))
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("temporary paths are UTF-8")
+}
+
+#[test]
+fn resumed_run_ends_with_the_uninterrupted_hash_on_every_executor() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = ["--scene", "sparse-gas"];
+    let whole = hash_of(&ok(&[&["run"], &scene[..], &["--steps", "150"]].concat()));
+    for executor in [
+        vec!["--executor", "reference"],
+        vec!["--executor", "virtual", "--worlds", "5", "--mode", "world"],
+        vec!["--executor", "threaded", "--threads", "2", "--worlds", "3"],
+    ] {
+        let file = dir.path().join("gas.ckpt");
+        // The first part on the virtual executor, the rest on each executor.
+        let first = ok(&[
+            &["run"],
+            &scene[..],
+            &[
+                "--steps",
+                "90",
+                "--executor",
+                "virtual",
+                "--checkpoint",
+                s(&file),
+                "--checkpoint-every",
+                "40",
+            ],
+        ]
+        .concat());
+        assert!(first.contains("at step 90"), "{first}");
+        let resumed = ok(&[&["resume", s(&file), "--steps", "150"], &executor[..]].concat());
+        assert_eq!(
+            hash_of(&resumed),
+            whole,
+            "resumed with {executor:?}:\n{resumed}"
+        );
+        assert!(resumed.contains("resumed"), "{resumed}");
+    }
+}
+
+#[test]
+fn resume_without_executor_options_continues_on_the_checkpointed_executor() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("cubes.ckpt");
+    let whole = hash_of(&ok(&["run", "--objects", "300", "--steps", "80"]));
+    // A threaded run on 4 worlds stopped at step 60, resumed to 80 with no executor option.
+    ok(&[
+        "run",
+        "--objects",
+        "300",
+        "--steps",
+        "60",
+        "--executor",
+        "threaded",
+        "--threads",
+        "2",
+        "--worlds",
+        "4",
+        "--checkpoint",
+        s(&file),
+    ]);
+    let resumed = ok(&["resume", s(&file), "--steps", "80"]);
+    assert!(resumed.contains("threaded executor"), "{resumed}");
+    assert!(resumed.contains("4 (blocks partition)"), "{resumed}");
+    assert_eq!(hash_of(&resumed), whole);
+}
+
+/// Runs `soda run` with a checkpoint every step and kills it with SIGKILL after `delay`;
+/// returns whether a checkpoint's temporary file was left (the kill hit a write).
+fn run_and_kill(args: &[&str], file: &Path, delay: Duration) -> bool {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_soda"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("soda starts");
+    std::thread::sleep(delay);
+    // SIGKILL: no handler, no destructor, no cleanup runs.
+    let _ = child.kill();
+    let _ = child.wait();
+    let dir = file.parent().unwrap();
+    let temp_prefix = format!(".{}.tmp-", file.file_name().unwrap().to_string_lossy());
+    let mut left = false;
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let entry = entry.unwrap();
+        if entry
+            .file_name()
+            .to_string_lossy()
+            .starts_with(&temp_prefix)
+        {
+            left = true;
+            std::fs::remove_file(entry.path()).unwrap();
+        }
+    }
+    left
+}
+
+#[test]
+fn run_killed_at_random_moments_resumes_to_the_uninterrupted_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("pile.ckpt");
+    let scene = ["run", "--objects", "2000", "--steps", "240"];
+    let started = Instant::now();
+    let whole = hash_of(&ok(&scene));
+    let mut rng = ChaCha8Rng::seed_from_u64(18);
+    let mut killed_during_write = 0;
+    let mut resumed = 0;
+    for (i, executor) in [
+        vec!["--executor", "reference"],
+        vec!["--executor", "virtual", "--worlds", "4"],
+        vec!["--executor", "threaded", "--threads", "2", "--worlds", "2"],
+    ]
+    .iter()
+    .cycle()
+    .take(9)
+    .enumerate()
+    {
+        let _ = std::fs::remove_file(&file);
+        let args = [
+            &scene[..],
+            executor,
+            &["--checkpoint", s(&file), "--checkpoint-every", "1"],
+        ]
+        .concat();
+        // Once the first run shows how long a checkpointed run takes, kill at random moments
+        // of it; the first kill of each executor comes early, the others anywhere.
+        let span = started.elapsed().as_millis().clamp(300, 4_000) as u64;
+        let delay = Duration::from_millis(if i < 3 {
+            rng.random_range(150..300)
+        } else {
+            rng.random_range(150..150 + span)
+        });
+        if run_and_kill(&args, &file, delay) {
+            killed_during_write += 1;
+        }
+        if !file.exists() {
+            // Killed before the first checkpoint was whole: nothing to resume, nothing lost.
+            continue;
+        }
+        let out = ok(&["resume", s(&file), "--steps", "240"]);
+        assert_eq!(
+            hash_of(&out),
+            whole,
+            "killed after {delay:?} on {executor:?}, resumed:\n{out}"
+        );
+        resumed += 1;
+    }
+    assert!(resumed >= 4, "only {resumed} of 9 kills left a checkpoint");
+    assert!(
+        killed_during_write >= 1,
+        "no kill of 9 hit a checkpoint write (each leaves its temporary file)"
+    );
+}
+
+#[test]
+fn damaged_edited_or_foreign_checkpoints_are_refused_with_a_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("gas.ckpt");
+    ok(&[
+        "run",
+        "--scene",
+        "sparse-gas",
+        "--steps",
+        "30",
+        "--checkpoint",
+        s(&file),
+    ]);
+    let text = std::fs::read_to_string(&file).unwrap();
+    let bad = dir.path().join("bad.ckpt");
+    let refused = |contents: &str| {
+        std::fs::write(&bad, contents).unwrap();
+        fails(&["resume", s(&bad)])
+    };
+    // Cut off in the middle.
+    let err = refused(&text[..text.len() / 2]);
+    assert!(err.contains("truncated"), "{err}");
+    // Cut off just before the end of the checksum line.
+    let err = refused(&text[..text.len() - 1]);
+    assert!(err.contains("truncated"), "{err}");
+    // One digit of a body changed: the second digit of the first body's twelfth word (the
+    // bits of its position's x, a large number).
+    let states = text.find("\"states\":[[").unwrap() + "\"states\":[[".len();
+    let twelfth = states + text[states..].match_indices(',').nth(10).unwrap().0 + 1;
+    let at = twelfth + 1;
+    let mut edited = text.clone().into_bytes();
+    assert!(edited[at].is_ascii_digit());
+    edited[at] = b'0' + (edited[at] - b'0' + 1) % 10;
+    let err = refused(std::str::from_utf8(&edited).unwrap());
+    assert!(err.contains("damaged or was edited"), "{err}");
+    // A body edited and the checksum made to match: the states' hash refuses it.
+    let body_end = text.trim_end_matches('\n').rfind('\n').unwrap() + 1;
+    let content = std::str::from_utf8(&edited[..body_end]).unwrap();
+    let mut fnv: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in content.as_bytes() {
+        fnv = (fnv ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    let err = refused(&format!("{content}checksum {fnv:016x}\n"));
+    assert!(err.contains("not the committed states of step 30"), "{err}");
+    // Another program's file, a scene file, an empty file, binary junk.
+    for foreign in ["name = \"x\"\n", "", "\u{0}\u{1}\u{2}"] {
+        let err = refused(foreign);
+        assert!(err.contains("not a SODA checkpoint"), "{foreign:?}: {err}");
+    }
+    // A later format version.
+    let err = refused(&text.replacen("soda-checkpoint 1", "soda-checkpoint 2", 1));
+    assert!(err.contains("format version 2"), "{err}");
+    // Missing file.
+    let err = fails(&["resume", s(&dir.path().join("missing.ckpt"))]);
+    assert!(err.contains("cannot read the checkpoint"), "{err}");
+}
+
+#[test]
+fn checkpoint_path_is_checked_before_the_run_like_every_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let nowhere = dir.path().join("no/such/dir/x.ckpt");
+    let err = fails(&["run", "--steps", "5", "--checkpoint", s(&nowhere)]);
+    assert!(err.contains("--checkpoint"), "{err}");
+    let same = dir.path().join("same.out");
+    let err = fails(&[
+        "run",
+        "--steps",
+        "5",
+        "--checkpoint",
+        s(&same),
+        "--counters",
+        s(&same),
+    ]);
+    assert!(
+        err.contains("--checkpoint") && err.contains("--counters"),
+        "{err}"
+    );
+    let o = cli_support::soda(&["run", "--steps", "5", "--checkpoint-every", "3"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+}
