@@ -36,7 +36,8 @@ Every output path is checked before step 1. Files are written under a temporary 
 and renamed into place, so each is the old file or a whole new one (--csv appends its row
 under a lock and cuts the table back if the append fails). Ctrl-C stops at the
 next committed step, keeps the --record file (whole frames so far), prints
-`interrupted at step N, hash H` and exits with 130.";
+`interrupted at step N, hash H` and exits with 130. With --checkpoint FILE, `soda resume
+FILE` continues an interrupted (or killed) run to the same final hash.";
 
 /// Options of `soda run`.
 #[derive(Debug, Args)]
