@@ -125,6 +125,42 @@ pub enum CheckpointError {
     },
 }
 
+/// The model a checkpoint's text holds, after checking its format, version, completeness and
+/// checksum (to pick the model before reading its states).
+pub fn model_of(text: &str) -> Result<String, CheckpointError> {
+    parse::<serde_json::Value>(text).map(|c| c.model)
+}
+
+/// Checks the format line, the checksum line and the checksum, and parses the document.
+fn parse<R: DeserializeOwned>(text: &str) -> Result<Checkpoint<R>, CheckpointError> {
+    let first = text.lines().next().unwrap_or("");
+    let version = match first.split_once(' ') {
+        Some((MAGIC, v)) => v,
+        _ => return Err(CheckpointError::NotACheckpoint),
+    };
+    if version != VERSION.to_string() {
+        return Err(CheckpointError::UnsupportedVersion {
+            found: version.to_string(),
+        });
+    }
+    let body_end = text
+        .trim_end_matches('\n')
+        .rfind('\n')
+        .map(|i| i + 1)
+        .ok_or(CheckpointError::Truncated)?;
+    let (body, last) = text.split_at(body_end);
+    let stored = match last.strip_prefix("checksum ") {
+        Some(sum) if last.ends_with('\n') => sum.trim_end().to_string(),
+        _ => return Err(CheckpointError::Truncated),
+    };
+    let computed = checksum(body.as_bytes());
+    if stored != computed {
+        return Err(CheckpointError::ChecksumMismatch { stored, computed });
+    }
+    serde_json::from_str(&body[first.len()..])
+        .map_err(|e| CheckpointError::Malformed(e.to_string()))
+}
+
 /// The FNV-1a 64 checksum of `bytes`, 16 hex digits.
 fn checksum(bytes: &[u8]) -> String {
     let mut h = StateHash::new();
@@ -172,33 +208,7 @@ impl<R: Serialize + DeserializeOwned> Checkpoint<R> {
     /// completeness and checksum are checked (the states' hash is checked by
     /// [`states`](Self::states)).
     pub fn from_text(text: &str, model: &str) -> Result<Self, CheckpointError> {
-        let first = text.lines().next().unwrap_or("");
-        let version = match first.split_once(' ') {
-            Some((MAGIC, v)) => v,
-            _ => return Err(CheckpointError::NotACheckpoint),
-        };
-        if version != VERSION.to_string() {
-            return Err(CheckpointError::UnsupportedVersion {
-                found: version.to_string(),
-            });
-        }
-        let body_end = text
-            .trim_end_matches('\n')
-            .rfind('\n')
-            .map(|i| i + 1)
-            .ok_or(CheckpointError::Truncated)?;
-        let (body, last) = text.split_at(body_end);
-        let stored = match last.strip_prefix("checksum ") {
-            Some(sum) if last.ends_with('\n') => sum.trim_end().to_string(),
-            _ => return Err(CheckpointError::Truncated),
-        };
-        let computed = checksum(body.as_bytes());
-        if stored != computed {
-            return Err(CheckpointError::ChecksumMismatch { stored, computed });
-        }
-        let doc = &body[first.len()..];
-        let checkpoint: Checkpoint<R> =
-            serde_json::from_str(doc).map_err(|e| CheckpointError::Malformed(e.to_string()))?;
+        let checkpoint: Checkpoint<R> = parse(text)?;
         if checkpoint.model != model {
             return Err(CheckpointError::WrongModel {
                 found: checkpoint.model,
@@ -234,6 +244,77 @@ impl<R: Serialize + DeserializeOwned> Checkpoint<R> {
             });
         }
         Ok(states)
+    }
+}
+
+/// An epidemic agent: 11 words — id, position, velocity, health (0 susceptible, 1 infected,
+/// 2 recovered), steps since the last change, the next and end of its id range.
+impl ExactState for crate::models::epidemic::Agent {
+    fn to_words(&self, out: &mut Vec<u64>) {
+        use crate::models::epidemic::Health;
+        out.push(self.id);
+        out.extend(self.pos.iter().map(|v| u64::from(v.to_bits())));
+        out.extend(self.vel.iter().map(|v| u64::from(v.to_bits())));
+        out.push(match self.health {
+            Health::Susceptible => 0,
+            Health::Infected => 1,
+            Health::Recovered => 2,
+        });
+        out.extend([u64::from(self.since), self.next_id, self.end_id]);
+    }
+
+    fn from_words(w: &[u64]) -> Result<Self, String> {
+        use crate::models::epidemic::Health;
+        if w.len() != 11 {
+            return Err(format!("an agent has 11 words, this one {}", w.len()));
+        }
+        let f = |k: usize| finite_f32(w, k);
+        Ok(crate::models::epidemic::Agent {
+            id: w[0],
+            pos: [f(1)?, f(2)?, f(3)?],
+            vel: [f(4)?, f(5)?, f(6)?],
+            health: match w[7] {
+                0 => Health::Susceptible,
+                1 => Health::Infected,
+                2 => Health::Recovered,
+                other => return Err(format!("health {other} is not 0, 1 or 2")),
+            },
+            since: u32::try_from(w[8]).map_err(|_| "word 8 is not 32 bits".to_string())?,
+            next_id: w[9],
+            end_id: w[10],
+        })
+    }
+}
+
+/// A PHOLD job: 5 words — id, position, value.
+impl ExactState for crate::models::phold::Job {
+    fn to_words(&self, out: &mut Vec<u64>) {
+        out.push(self.id);
+        out.extend(self.pos.iter().map(|v| u64::from(v.to_bits())));
+        out.push(self.value);
+    }
+
+    fn from_words(w: &[u64]) -> Result<Self, String> {
+        if w.len() != 5 {
+            return Err(format!("a job has 5 words, this one {}", w.len()));
+        }
+        let f = |k: usize| finite_f32(w, k);
+        Ok(crate::models::phold::Job {
+            id: w[0],
+            pos: [f(1)?, f(2)?, f(3)?],
+            value: w[4],
+        })
+    }
+}
+
+/// Word `k` of `w` as the finite f32 whose bits it holds.
+fn finite_f32(w: &[u64], k: usize) -> Result<f32, String> {
+    let bits = u32::try_from(w[k]).map_err(|_| format!("word {k} is not 32 bits"))?;
+    let v = f32::from_bits(bits);
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("word {k} is not a finite number"))
     }
 }
 

@@ -257,3 +257,45 @@ fn checkpoint_path_is_checked_before_the_run_like_every_output() {
     let o = cli_support::soda(&["run", "--steps", "5", "--checkpoint-every", "3"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
+
+#[test]
+fn registered_models_resume_from_their_checkpoints_to_the_uninterrupted_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    for (model, size) in [("epidemic", "400"), ("phold", "1500")] {
+        let base = ["run", "--model", model, "--entities", size];
+        let whole = hash_of(&ok(&[&base[..], &["--steps", "90"]].concat()));
+        let file = dir.path().join(format!("{model}.ckpt"));
+        let first = ok(&[
+            &base[..],
+            &[
+                "--steps",
+                "50",
+                "--executor",
+                "threaded",
+                "--worlds",
+                "3",
+                "--checkpoint",
+                s(&file),
+                "--checkpoint-every",
+                "20",
+            ],
+        ]
+        .concat());
+        assert!(first.contains("at step 50"), "{first}");
+        for executor in [
+            vec![],
+            vec!["--executor", "reference"],
+            vec!["--executor", "virtual", "--worlds", "5"],
+        ] {
+            // Each resume keeps writing to the file: start from step 50's copy every time.
+            let copy = dir.path().join(format!("{model}-copy.ckpt"));
+            std::fs::copy(&file, &copy).unwrap();
+            let out = ok(&[&["resume", s(&copy), "--steps", "90"], &executor[..]].concat());
+            assert_eq!(
+                hash_of(&out),
+                whole,
+                "{model} resumed with {executor:?}:\n{out}"
+            );
+        }
+    }
+}

@@ -125,6 +125,18 @@ impl Drop for AtomicFile {
     }
 }
 
+/// Syncs the directory holding `path`, so a rename into it survives a power cut (best
+/// effort: some file systems cannot sync a directory).
+pub fn sync_dir_of(path: &Path) {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if let Ok(d) = File::open(dir) {
+        let _ = d.sync_all();
+    }
+}
+
 /// Writes `bytes` to `target` through an [`AtomicFile`].
 pub fn write(target: &Path, bytes: &[u8]) -> Result<()> {
     let mut file = AtomicFile::create(target)?;

@@ -17,6 +17,7 @@ pub fn run(
     steps: u64,
     json: bool,
     trace: Option<&Path>,
+    checkpoint: Option<&super::checkpoint::CheckpointPlan>,
 ) -> Result<ModelReport> {
     if trace.is_some() && options.executor == crate::sim::ExecutorKind::Reference {
         bail!("--trace records the Time Warp worlds, and the reference executor has none: add --executor virtual or --executor threaded");
@@ -27,7 +28,7 @@ pub fn run(
     }
     let mut options = options.clone();
     options.kernel.trace = trace.is_some();
-    let report = model.run(size, &options, steps)?;
+    let (report, written) = model.run_from(size, &options, None, steps, checkpoint)?;
     if let (Some(path), Some(t)) = (trace, &report.trace) {
         super::atomic::write(path, serde_json::to_string(t)?.as_bytes())?;
         eprintln!(
@@ -35,9 +36,18 @@ pub fn run(
             path.display()
         );
     }
+    print_report(model, &report, json)?;
+    if let (Some(plan), Some(step), false) = (checkpoint, written, json) {
+        println!("checkpoint       {} at step {step}", plan.path.display());
+    }
+    Ok(report)
+}
+
+/// Prints a run's report: JSON, or the summary ending with the `hash` line.
+pub fn print_report(model: &dyn RegisteredModel, report: &ModelReport, json: bool) -> Result<()> {
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
-        return Ok(report);
+        return Ok(());
     }
     println!("model            {} ({})", model.name(), model.about());
     println!(
@@ -79,7 +89,7 @@ pub fn run(
         );
     }
     println!("hash             {}", report.hash);
-    Ok(report)
+    Ok(())
 }
 
 /// `verify --model NAME`: every check of `options`, one line per run, the diagnosis; an

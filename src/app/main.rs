@@ -24,6 +24,9 @@ enum Command {
     Models,
     /// Run a model on an executor and print a summary ending with the final hash.
     Run(RunArgs),
+    /// Continue a run from its checkpoint (`run --checkpoint FILE`) to the same final hash as
+    /// the uninterrupted run.
+    Resume(ResumeArgs),
     /// Check that the virtual and threaded executors commit the reference's bits, with the
     /// contract checker and a diagnosis.
     Verify(VerifyArgs),
@@ -111,6 +114,34 @@ struct RunArgs {
     /// for `plot`.
     #[arg(long, value_name = "FILE")]
     trace: Option<std::path::PathBuf>,
+    /// Write a checkpoint (the committed states, exact, and the run's settings) to FILE every
+    /// --checkpoint-every steps and at the last step; `resume FILE` continues from it.
+    #[arg(long, value_name = "FILE")]
+    checkpoint: Option<std::path::PathBuf>,
+    /// With --checkpoint: steps between checkpoints.
+    #[arg(long, value_name = "N", default_value_t = 100, requires = "checkpoint",
+          value_parser = clap::value_parser!(u64).range(1..))]
+    checkpoint_every: u64,
+}
+
+#[derive(Debug, Args)]
+struct ResumeArgs {
+    /// The checkpoint `run --checkpoint FILE` wrote.
+    #[arg(value_name = "FILE")]
+    file: std::path::PathBuf,
+    /// The step to reach [default: the checkpointed run's --steps].
+    #[arg(long, value_name = "N")]
+    steps: Option<u64>,
+    /// Executor: reference, virtual or threaded [default: the checkpointed run's, with its
+    /// kernel options].
+    #[arg(long, value_name = "E")]
+    executor: Option<String>,
+    /// Threads of the threaded executor [default: the checkpointed run's].
+    #[arg(long, value_name = "T")]
+    threads: Option<usize>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Debug, Args)]
@@ -208,7 +239,27 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                 kernel: a.kernel.config()?.mode(parse_mode(&a.mode)?),
                 threads: threads(a.threads),
             };
-            commands::run(m, &size, &options, a.steps, a.json, a.trace.as_deref()).map(|_| ())
+            let checkpoint = match &a.checkpoint {
+                Some(path) => Some(super::checkpoint::CheckpointPlan::checked(
+                    path,
+                    a.checkpoint_every,
+                )?),
+                None => None,
+            };
+            commands::run(
+                m,
+                &size,
+                &options,
+                a.steps,
+                a.json,
+                a.trace.as_deref(),
+                checkpoint.as_ref(),
+            )
+            .map(|_| ())
+        }
+        Command::Resume(a) => {
+            let options = resume_options(&a.file, a.executor.as_deref(), a.threads)?;
+            super::checkpoint::resume(registry, &a.file, a.steps, options, a.json)
         }
         Command::Verify(a) => {
             let (m, size) = model(registry, &a.model)?;
@@ -251,6 +302,30 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
             commands::granularity(m, &size, &a.kernel.config()?, &windows, a.seeds, a.steps)
         }
     }
+}
+
+/// The options `resume` overrides: none (the checkpoint's), or the checkpoint's kernel
+/// configuration on `--executor` and `--threads`.
+fn resume_options(
+    file: &std::path::Path,
+    executor: Option<&str>,
+    threads: Option<usize>,
+) -> Result<Option<RunOptions>> {
+    if executor.is_none() && threads.is_none() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(file)
+        .map_err(|e| anyhow!("cannot read the checkpoint {}: {e}", file.display()))?;
+    let name = crate::checkpoint::model_of(&text)?;
+    let c = crate::checkpoint::Checkpoint::<super::checkpoint::AppRun>::from_text(&text, &name)?;
+    let mut options = c.run.options;
+    if let Some(e) = executor {
+        options.executor = e.parse()?;
+    }
+    if let Some(t) = threads {
+        options.threads = t.max(1);
+    }
+    Ok(Some(options))
 }
 
 /// Parses `all` or a comma-separated list of rollback modes.

@@ -20,6 +20,7 @@
 
 pub mod atomic;
 pub mod charts;
+pub mod checkpoint;
 pub mod commands;
 mod main;
 mod registry;

@@ -179,7 +179,7 @@ impl CheckpointWriter {
         file.write_all(text.as_bytes())
             .with_context(|| format!("cannot write the checkpoint {}", self.path.display()))?;
         file.commit()?;
-        sync_parent(&self.path);
+        soda::app::atomic::sync_dir_of(&self.path);
         self.written = Some(frame.step);
         Ok(())
     }
@@ -192,18 +192,6 @@ impl CheckpointWriter {
     /// The checkpoint's path.
     pub fn path(&self) -> &Path {
         &self.path
-    }
-}
-
-/// Syncs the directory holding `path`, so the rename that put it in place survives a power
-/// cut (best effort: some file systems cannot sync a directory).
-fn sync_parent(path: &Path) {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    if let Ok(d) = std::fs::File::open(dir) {
-        let _ = d.sync_all();
     }
 }
 

@@ -58,6 +58,25 @@ fn executor_given(matches: &ArgMatches) -> bool {
 
 /// Runs the command; `matches` are `soda resume`'s own, to tell given options from defaults.
 pub fn resume(args: &ResumeArgs, matches: &ArgMatches) -> Result<()> {
+    // A checkpoint of another model than rigid bodies: the registered models' resume.
+    if let Ok(text) = std::fs::read_to_string(&args.file) {
+        if let Ok(model) = soda::checkpoint::model_of(&text) {
+            if model != super::RIGID_BODIES {
+                let options = if executor_given(matches) {
+                    Some(args.executor.options()?)
+                } else {
+                    None
+                };
+                return soda::app::checkpoint::resume(
+                    &soda::app::Registry::examples(),
+                    &args.file,
+                    args.steps,
+                    options,
+                    args.output.json,
+                );
+            }
+        }
+    }
     let (checkpoint, bodies) = super::checkpoint::read(&args.file)?;
     let run = checkpoint.run;
     let options = if executor_given(matches) {
