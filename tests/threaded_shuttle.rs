@@ -8,8 +8,7 @@
 //! A failing schedule prints a shuttle replay string; `SHUTTLE_ITERATIONS` raises the count.
 
 use soda::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
-use soda::exec::threaded::run_threaded_with;
-use soda::frame::StatesWanted;
+use soda::exec::threaded::{run_threaded_with, ThreadedOptions, ThreadedSetup};
 use soda::kernel::synthetic::Particles;
 use soda::kernel::{BalanceConfig, KernelConfig, LoadSource, PartitionKind, RollbackMode};
 use soda::ReferenceRun;
@@ -103,13 +102,8 @@ fn case_with(mode: RollbackMode, balance: BalanceConfig) -> impl Fn() + Send + S
     move || {
         let mut got = Vec::new();
         let report = run_threaded_with::<Particles, ShuttleFacade>(
-            model.clone(),
-            grid.clone(),
-            bodies.clone(),
-            &config,
-            2,
-            STEPS,
-            StatesWanted::none(),
+            ThreadedSetup::new(model.clone(), grid.clone(), bodies.clone()),
+            &ThreadedOptions::new(&config, 2, STEPS),
             |f, _| got.push(f.hash),
         )
         .expect("the threaded run succeeds");

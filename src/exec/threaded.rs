@@ -26,12 +26,12 @@ use super::clock::thread_cpu_seconds;
 use super::control::RunControl;
 pub use super::error::ExecError;
 use super::error::InputError;
+use super::load::LoadMeter;
 use super::schedule::Schedule;
 use super::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex, StdFacade};
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
-use crate::kernel::config::LoadSource;
 use crate::kernel::counters::Counters;
 use crate::kernel::message::{Input, Message};
 use crate::kernel::partition::WorldId;
@@ -90,15 +90,38 @@ pub struct ThreadedReport<E> {
     pub balance: Vec<RoundRecord>,
 }
 
-const RUNNING: u64 = 0;
-const DONE: u64 = 1;
-const FAILED: u64 = 2;
+/// Where a threaded run (or its current epoch) is. Stored in an atomic as its `u64`, so
+/// the workers and the output stage read it without a lock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RunStatus {
+    /// The workers run worlds.
+    Running = 0,
+    /// The epoch's last step is committed, or the sink stopped the run: the workers return.
+    Done = 1,
+    /// A world panicked or the run stalled (the error is in `SharedRun::error`).
+    Failed = 2,
+}
+
+impl RunStatus {
+    /// The status stored as `v` (`RunStatus as u64`).
+    fn from_u64(v: u64) -> RunStatus {
+        match v {
+            0 => RunStatus::Running,
+            1 => RunStatus::Done,
+            2 => RunStatus::Failed,
+            _ => unreachable!("run status {v} was never stored"),
+        }
+    }
+}
 
 /// The `spins` the output stage passes to [`Facade::pause`]: it polls at a slow pace.
 const OUTPUT_PAUSE: u32 = u32::MAX;
 
-struct Shared<M: CellModel + 'static, F: Facade> {
-    worlds: Vec<F::Mutex<Slot<M>>>,
+/// The state of a threaded run that the worker threads and the output stage share.
+struct SharedRun<M: CellModel + 'static, F: Facade> {
+    /// The worlds, each under its own lock (a world runs on one thread at a time).
+    worlds: Vec<F::Mutex<ThreadedWorld<M>>>,
+    /// Per world, the messages sent to it and not yet received.
     inboxes: Vec<F::Mutex<Vec<Message<M::State>>>>,
     /// Per world, a lower bound of its `bound()` (written only under the world's lock).
     published: Vec<F::Atomic>,
@@ -117,19 +140,27 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     /// any thread takes them when nothing is ready, so a waiting world never sits behind a
     /// busy thread's work. A token is live only while the schedule still holds it.
     waiting: Injector<(usize, u64)>,
+    /// The current GVT.
     gvt: F::Atomic,
+    /// The last step whose frame went to the output stage (0 before any).
     committed: F::Atomic,
+    /// 1 while a thread computes GVT or posts an input (they exclude each other).
     gvt_round: F::Atomic,
+    /// A [`RunStatus`] as its `u64`.
     status: F::Atomic,
     /// The last step of the current epoch: the run's last step, or the next balancing
     /// round's (the worlds stop there so every state at it is final when cells move).
     target: F::Atomic,
+    /// Whether the mode is optimistic (not conservative).
     optimistic: bool,
     /// How many steps a world may compute ahead of its slowest neighbour world before it
     /// lets laggards run first (optimistic modes; `KernelConfig::lead`).
     lead: Step,
+    /// Committed steps being assembled from the worlds' contributions.
     assembly: F::Mutex<Assembly<M>>,
+    /// Whole committed steps waiting for the output stage, and the run's statistics.
     out: F::Mutex<Output<M>>,
+    /// The first error of the run (a world panicked, the run stalled).
     error: F::Mutex<Option<ExecError>>,
     /// The inputs posted so far: their number (the next input's sequence number) and one
     /// copy of each (re-posted to the worlds after a balancing round that moved cells).
@@ -138,19 +169,20 @@ struct Shared<M: CellModel + 'static, F: Facade> {
     grid: Arc<Grid>,
     /// 1 once the sink stopped the run.
     stop: F::Atomic,
-    /// Whether worlds record a trace (`KernelConfig::trace`), and the run's start.
+    /// Whether worlds record a trace (`KernelConfig::trace`).
     trace: bool,
+    /// When the run started (trace times count from it).
     started: Instant,
 }
 
-/// A world, the last step it has handed to the frame assembly, and the CPU seconds its
-/// actions took since the last balancing round (its measured load).
-struct Slot<M: CellModel> {
+/// A world as the threaded executor holds it, under the world's lock.
+struct ThreadedWorld<M: CellModel> {
+    /// The world.
     world: World<M>,
+    /// The last step it has handed to the frame assembly.
     contributed: Step,
-    busy: f64,
-    /// The summed LVT − GVT after its actions since the last round, and their number.
-    lead: (f64, u64),
+    /// What the next balancing round measures of it (busy CPU time, lead over GVT).
+    meter: LoadMeter,
 }
 
 /// The inputs posted so far.
@@ -164,14 +196,19 @@ struct InputLog<S> {
 
 /// Committed steps being assembled from the worlds' contributions.
 struct Assembly<M: CellModel> {
+    /// The steps some worlds have contributed to, by step.
     partial: BTreeMap<Step, Partial<M>>,
+    /// The next step to go to the output stage (when every world has contributed it).
     next: Step,
 }
 
+/// One committed step's contributions so far.
 struct Partial<M: CellModel> {
+    /// How many worlds contributed.
     worlds: usize,
     /// The contributing worlds' cells' states (any order), shared with their logs.
     states: Vec<Arc<[M::State]>>,
+    /// The events of their cells' computations of the step before.
     events: Vec<Event<M::Event>>,
 }
 
@@ -179,9 +216,13 @@ struct Partial<M: CellModel> {
 /// contributed) but not yet sorted and hashed: the output stage finishes the frames, off the
 /// workers' critical path.
 struct Output<M: CellModel> {
+    /// Whole committed steps, in step order.
     pending: VecDeque<(Step, Partial<M>)>,
+    /// How many times GVT advanced.
     gvt_advances: u64,
+    /// The worker threads' times, summed as they finish.
     times: ThreadTimes,
+    /// GVT over time (with a trace).
     gvt_samples: Vec<GvtSample>,
 }
 
@@ -200,7 +241,17 @@ impl<M: CellModel> Default for Output<M> {
 /// has stalled (a kernel bug) rather than waiting for ever.
 const STALL_CHECK_SPINS: u32 = 20_000;
 
-impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
+impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
+    /// The run's status now.
+    fn status(&self) -> RunStatus {
+        RunStatus::from_u64(self.status.load())
+    }
+
+    /// Sets the run's status.
+    fn set_status(&self, status: RunStatus) {
+        self.status.store(status as u64);
+    }
+
     /// Queues world `w` in the ready set unless it is already queued or taken. A waiting
     /// world moves to the ready set (its token goes stale): what woke it (a message, a GVT
     /// advance) may let it act, and it must not wait behind worlds that are still blocked.
@@ -220,11 +271,11 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     }
 
     fn fail(&self, e: ExecError) {
-        let mut slot = self.error.lock();
-        if slot.is_none() {
-            *slot = Some(e);
+        let mut first = self.error.lock();
+        if first.is_none() {
+            *first = Some(e);
         }
-        self.status.store(FAILED);
+        self.set_status(RunStatus::Failed);
     }
 
     /// Sends `m`: into its receiver's inbox, lowering that inbox's published minimum.
@@ -287,7 +338,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         // waiting queue (still counted as queued, so the running thread does not queue a
         // second copy), and this thread serves another world — e.g. its own, which may
         // speculate ahead (`lead`) instead of blocking until the neighbour's step is done.
-        let Some(mut slot) = self.worlds[w].try_lock() else {
+        let Some(mut held) = self.worlds[w].try_lock() else {
             self.wait(w);
             return false;
         };
@@ -308,15 +359,13 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
                 self.inbox_min[w].store(u64::MAX);
                 drop(inbox);
                 for m in incoming {
-                    slot.world.receive(m);
+                    held.world.receive(m);
                 }
             }
         }
         let gvt = self.gvt.load();
-        self.contribute(&mut slot, gvt);
-        let Slot {
-            world, busy, lead, ..
-        } = &mut *slot;
+        self.contribute(&mut held, gvt);
+        let ThreadedWorld { world, meter, .. } = &mut *held;
         if self.postpone(world) {
             self.published[w].store(world.bound());
             // Still under the world's lock: a message that arrives after this is seen
@@ -337,9 +386,8 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
             if kind == ActionKind::Compute {
                 self.cost[w].store((spent * 1e9) as u64);
             }
-            *busy += thread_cpu_seconds() - c0;
-            lead.0 += world.lvt().saturating_sub(gvt) as f64;
-            lead.1 += 1;
+            meter.add_busy(thread_cpu_seconds() - c0);
+            meter.note_action(world.lvt(), gvt);
             *match kind {
                 ActionKind::Receive => &mut times.receive_seconds,
                 ActionKind::Repair => &mut times.rollback_seconds,
@@ -400,32 +448,32 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
 
     /// Hands the world's states of the steps below `gvt` not yet handed over to the frame
     /// assembly, then fossil-collects its logs.
-    fn contribute(&self, slot: &mut Slot<M>, gvt: Step) {
+    fn contribute(&self, held: &mut ThreadedWorld<M>, gvt: Step) {
         let last = (gvt - 1).min(self.target.load());
-        if slot.contributed >= last {
+        if held.contributed >= last {
             return;
         }
-        for t in slot.contributed + 1..=last {
-            slot.world.note_committed(t);
+        for t in held.contributed + 1..=last {
+            held.world.note_committed(t);
         }
         // The cells' states are handed over as shared references, not copied: a copy of a
         // heavy world's ~1,000 states into fresh memory took ~3 ms now and then (page faults
         // on memory the allocator had returned), holding up the world and its neighbours.
         // The output stage flattens them when it sorts and hashes the frame.
         let mut assembly = self.assembly.lock();
-        for t in slot.contributed + 1..=last {
+        for t in held.contributed + 1..=last {
             let part = assembly.partial.entry(t).or_insert_with(|| Partial {
                 worlds: 0,
                 states: Vec::new(),
                 events: Vec::new(),
             });
             part.worlds += 1;
-            part.states.extend(slot.world.shared_states_at(t));
-            part.events.extend(slot.world.events_at(t - 1).cloned());
+            part.states.extend(held.world.shared_states_at(t));
+            part.events.extend(held.world.events_at(t - 1).cloned());
         }
-        slot.contributed = last;
-        slot.world.sample_log_bytes();
-        slot.world.fossil_collect(last);
+        held.contributed = last;
+        held.world.sample_log_bytes();
+        held.world.fossil_collect(last);
         let n = self.worlds.len();
         let mut done = Vec::new();
         loop {
@@ -451,7 +499,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
         // balancing epochs read it to decide whether the run is over).
         self.committed.store(last_step);
         if last_step >= self.target.load() {
-            self.status.store(DONE);
+            self.set_status(RunStatus::Done);
         }
         drop(assembly);
     }
@@ -553,7 +601,7 @@ impl<M: CellModel + 'static, F: Facade> Shared<M, F> {
     fn worker_loop(&self, me: usize) {
         let mut times = ThreadTimes::default();
         let mut spins = 0u32;
-        while self.status.load() == RUNNING {
+        while self.status() == RunStatus::Running {
             let t0 = Instant::now();
             match self.find_task(me, &mut times.steals) {
                 Some(w) => {
@@ -630,50 +678,59 @@ pub fn run_threaded<M: CellModel + 'static>(
     steps: u64,
 ) -> Result<ThreadedReport<M::Event>, ExecError> {
     run_threaded_with::<M, StdFacade>(
-        model,
-        grid,
-        initial,
-        config,
-        threads,
-        steps,
-        StatesWanted::none(),
+        ThreadedSetup::new(model, grid, initial),
+        &ThreadedOptions::new(config, threads, steps),
         |_, _| {},
     )
 }
 
+/// How a threaded run runs: the kernel configuration, the threads, the steps to commit and
+/// the committed states its sink wants.
+#[derive(Clone, Debug)]
+pub struct ThreadedOptions<'a> {
+    /// The kernel configuration (worlds, mode, window, balancing, …).
+    pub config: &'a KernelConfig,
+    /// The number of OS threads (at least 1 is used).
+    pub threads: usize,
+    /// The number of steps to commit.
+    pub steps: u64,
+    /// The steps whose committed states (sorted by id) the sink gets.
+    pub wanted: StatesWanted,
+}
+
+impl<'a> ThreadedOptions<'a> {
+    /// `steps` steps on `threads` threads under `config`, no states wanted.
+    pub fn new(config: &'a KernelConfig, threads: usize, steps: u64) -> Self {
+        ThreadedOptions {
+            config,
+            threads,
+            steps,
+            wanted: StatesWanted::none(),
+        }
+    }
+
+    /// The same options, handing the sink the committed states of the steps `wanted` asks
+    /// for.
+    pub fn wanted(mut self, wanted: StatesWanted) -> Self {
+        self.wanted = wanted;
+        self
+    }
+}
+
 /// [`run_threaded`] over any [`Facade`] (shuttle tests pass their own), handing every
 /// committed frame, in step order, to `sink` on the calling thread (the output stage),
-/// with the committed states (sorted by id) of the steps `wanted` asks for.
+/// with the committed states (sorted by id) of the steps `options.wanted` asks for.
 ///
 /// With balancing on (`config.balance`), the run is cut into epochs of `period` steps: the
 /// worlds stop at the epoch's last step, the threads finish and are joined (GVT is then
 /// that step + 1, every state at it final), a balancing round moves cells between the
 /// worlds from their busy time per committed step, and the next epoch starts new threads.
-#[allow(clippy::too_many_arguments)]
 pub fn run_threaded_with<M: CellModel + 'static, F: Facade>(
-    model: M,
-    grid: Grid,
-    initial: Vec<M::State>,
-    config: &KernelConfig,
-    threads: usize,
-    steps: u64,
-    wanted: StatesWanted,
+    setup: ThreadedSetup<M>,
+    options: &ThreadedOptions<'_>,
     mut sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>),
 ) -> Result<ThreadedReport<M::Event>, ExecError> {
-    run_threaded_controlled::<M, F>(
-        ThreadedSetup {
-            model,
-            grid,
-            initial,
-            inputs: Vec::new(),
-            keep_frames: true,
-        },
-        config,
-        threads,
-        steps,
-        wanted,
-        |f, s, _| sink(f, s),
-    )
+    run_threaded_controlled::<M, F>(setup, options, |f, s, _| sink(f, s))
 }
 
 /// What a threaded run starts from: the model, the grid, the initial states and the inputs
@@ -692,17 +749,33 @@ pub struct ThreadedSetup<M: CellModel> {
     pub keep_frames: bool,
 }
 
+impl<M: CellModel> ThreadedSetup<M> {
+    /// `model` on `grid` from `initial`, no scripted inputs, every frame kept.
+    pub fn new(model: M, grid: Grid, initial: Vec<M::State>) -> Self {
+        ThreadedSetup {
+            model,
+            grid,
+            initial,
+            inputs: Vec::new(),
+            keep_frames: true,
+        }
+    }
+}
+
 /// [`run_threaded_with`] with scripted inputs, and a sink that also gets a [`RunControl`]
 /// to schedule inputs during the run (checked against GVT at that moment) or stop it after
 /// the current frame. Stopping ends the run early: the report holds the frames delivered.
 pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     setup: ThreadedSetup<M>,
-    config: &KernelConfig,
-    threads: usize,
-    steps: u64,
-    wanted: StatesWanted,
+    options: &ThreadedOptions<'_>,
     mut sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
 ) -> Result<ThreadedReport<M::Event>, ExecError> {
+    let ThreadedOptions {
+        config,
+        threads,
+        steps,
+        ref wanted,
+    } = *options;
     let ThreadedSetup {
         model,
         grid,
@@ -743,15 +816,14 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         .iter()
         .map(|i| F::Atomic::new(i.iter().map(|m| m.affects()).min().unwrap_or(u64::MAX)))
         .collect();
-    let shared = Arc::new(Shared::<M, F> {
+    let shared = Arc::new(SharedRun::<M, F> {
         worlds: worlds
             .into_iter()
             .map(|world| {
-                F::Mutex::new(Slot {
+                F::Mutex::new(ThreadedWorld {
                     world,
                     contributed: 0,
-                    busy: 0.0,
-                    lead: (0.0, 0),
+                    meter: LoadMeter::default(),
                 })
             })
             .collect(),
@@ -768,7 +840,11 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         gvt: F::Atomic::new(1),
         committed: F::Atomic::new(0),
         gvt_round: F::Atomic::new(0),
-        status: F::Atomic::new(if steps == 0 { DONE } else { RUNNING }),
+        status: F::Atomic::new(if steps == 0 {
+            RunStatus::Done as u64
+        } else {
+            RunStatus::Running as u64
+        }),
         target: F::Atomic::new(epoch_end),
         optimistic: config.mode != crate::kernel::RollbackMode::Conservative,
         lead: config.lead,
@@ -797,7 +873,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     let poster = shared.clone();
     let mut deliver = |batch: VecDeque<(Step, Partial<M>)>| {
         for (t, partial) in batch {
-            let (frame, states) = finish_frame::<M>(t, partial, &wanted);
+            let (frame, states) = finish_frame::<M>(t, partial, wanted);
             if delivered < steps && !stopped {
                 delivered += 1;
                 let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
@@ -807,7 +883,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
                 if control.stopped() {
                     stopped = true;
                     poster.stop.store(1);
-                    poster.status.store(DONE);
+                    poster.set_status(RunStatus::Done);
                 }
                 if keep_frames {
                     frames.push(frame);
@@ -817,7 +893,6 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     };
     let mut busy_total = vec![0.0f64; n];
     let mut last_round: Step = 0;
-    let mut computed_at_round = vec![0u64; n];
     loop {
         run_epoch(&shared, threads, &mut deliver)?;
         let committed = shared.committed.load();
@@ -830,23 +905,16 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         let span = (committed - last_round).max(1) as f64;
         let loads: Vec<f64> = locked
             .iter()
-            .enumerate()
-            .map(|(w, s)| match config.balance.load {
-                LoadSource::CellsComputed => {
-                    (s.world.counters().cells_computed - computed_at_round[w]) as f64 / span
-                }
-                _ => s.busy / span,
+            .map(|s| {
+                let computed = s.world.counters().cells_computed;
+                s.meter.load(config.balance.load, computed, span)
             })
             .collect();
-        let leads: Vec<f64> = locked
-            .iter()
-            .map(|s| s.lead.0 / s.lead.1.max(1) as f64)
-            .collect();
+        let leads: Vec<f64> = locked.iter().map(|s| s.meter.mean_lead()).collect();
         for (w, s) in locked.iter_mut().enumerate() {
-            busy_total[w] += s.busy;
-            s.busy = 0.0;
-            s.lead = (0.0, 0);
-            computed_at_round[w] = s.world.counters().cells_computed;
+            busy_total[w] += s.meter.busy_seconds();
+            let computed = s.world.counters().cells_computed;
+            s.meter.restart(computed);
         }
         let moved = super::balance_round(
             &mut balancer,
@@ -890,13 +958,13 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         }
         drop(locked);
         shared.target.store(epoch_end);
-        shared.status.store(RUNNING);
+        shared.set_status(RunStatus::Running);
     }
     let mut out = std::mem::take(&mut *shared.out.lock());
     deliver(std::mem::take(&mut out.pending));
     let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
     for (w, s) in locked.iter_mut().enumerate() {
-        busy_total[w] += s.busy;
+        busy_total[w] += s.meter.busy_seconds();
     }
     let world_counters = locked.iter().map(|s| s.world.counters().clone()).collect();
     let trace = config.trace.then(|| {
@@ -921,7 +989,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
 /// One epoch: every world is queued, `threads` workers run until the epoch's last step is
 /// committed (or the run fails), the output stage delivers frames meanwhile.
 fn run_epoch<M: CellModel + 'static, F: Facade>(
-    shared: &Arc<Shared<M, F>>,
+    shared: &Arc<SharedRun<M, F>>,
     threads: usize,
     deliver: &mut impl FnMut(VecDeque<(Step, Partial<M>)>),
 ) -> Result<(), ExecError> {
@@ -937,7 +1005,7 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
             F::spawn(move || shared.worker_loop(me))
         })
         .collect();
-    while shared.status.load() == RUNNING {
+    while shared.status() == RunStatus::Running {
         let batch = std::mem::take(&mut shared.out.lock().pending);
         if batch.is_empty() {
             F::pause(OUTPUT_PAUSE);

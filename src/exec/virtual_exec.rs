@@ -39,12 +39,13 @@
 
 use super::control::RunControl;
 use super::error::{ExecError, InputError};
+use super::load::LoadMeter;
 use super::sync::panic_message;
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
-use crate::kernel::config::RollbackMode;
 use crate::kernel::config::{KernelConfig, ScheduleSpec};
+use crate::kernel::config::{LoadSource, RollbackMode};
 use crate::kernel::counters::Counters;
 use crate::kernel::gvt::global_virtual_time;
 use crate::kernel::message::{Input, Message};
@@ -172,15 +173,13 @@ pub struct VirtualRun<M: CellModel> {
     gvt_advances: u64,
     started: std::time::Instant,
     gvt_samples: Vec<GvtSample>,
-    /// Load balancing: the balancer, the next round's step, the last round's step and
-    /// every world's cell computations then (the deterministic load proxy).
+    /// Load balancing: the balancer, the next round's step and the last round's step.
     balancer: Balancer,
     next_round: Step,
     last_round: Step,
-    computed_at_round: Vec<u64>,
-    /// Per world, the summed LVT − GVT after its actions since the last round, and their
-    /// number.
-    leads: Vec<(f64, u64)>,
+    /// Per world, what the next balancing round measures (cell computations, the
+    /// deterministic load proxy, and the lead over GVT).
+    meters: Vec<LoadMeter>,
     /// One copy of every input posted (re-posted to the worlds after a balancing round).
     inputs_posted: Vec<Message<M::State>>,
     /// A world's action that panicked (the run cannot go on).
@@ -217,7 +216,6 @@ impl<M: CellModel> VirtualRun<M> {
                 partition = p;
             }
         }
-        let computed_at_round = vec![0; worlds.len()];
         let mut run = VirtualRun {
             config: config.clone(),
             inputs: 0,
@@ -242,8 +240,7 @@ impl<M: CellModel> VirtualRun<M> {
             balancer,
             next_round: Step::MAX,
             last_round: 0,
-            computed_at_round,
-            leads: vec![(0.0, 0); worlds.len()],
+            meters: vec![LoadMeter::default(); worlds.len()],
             inputs_posted: Vec::new(),
             failure: None,
             stopped: false,
@@ -358,17 +355,16 @@ impl<M: CellModel> VirtualRun<M> {
             .iter()
             .map(|w| w.counters().cells_computed)
             .collect();
-        let loads: Vec<f64> = computed
+        let loads: Vec<f64> = self
+            .meters
             .iter()
-            .zip(&self.computed_at_round)
-            .map(|(now, then)| (now - then) as f64 / steps)
+            .zip(&computed)
+            .map(|(m, &now)| m.load(LoadSource::CellsComputed, now, steps))
             .collect();
-        let leads: Vec<f64> = self
-            .leads
-            .iter()
-            .map(|&(sum, n)| sum / n.max(1) as f64)
-            .collect();
-        self.leads.iter_mut().for_each(|l| *l = (0.0, 0));
+        let leads: Vec<f64> = self.meters.iter().map(LoadMeter::mean_lead).collect();
+        for (meter, &now) in self.meters.iter_mut().zip(&computed) {
+            meter.restart(now);
+        }
         let moved = super::balance_round(
             &mut self.balancer,
             &self.grid,
@@ -398,7 +394,6 @@ impl<M: CellModel> VirtualRun<M> {
                 self.deliver_inputs(copies);
             }
         }
-        self.computed_at_round = computed;
         self.last_round = step;
         self.next_round = self.balancer.next_round_after(step);
         let end = self.world_end(self.end);
@@ -581,9 +576,7 @@ impl<M: CellModel> VirtualRun<M> {
                     return;
                 }
             };
-            let lead = &mut self.leads[acts[i]];
-            lead.0 += self.worlds[acts[i]].lvt().saturating_sub(gvt) as f64;
-            lead.1 += 1;
+            self.meters[w].note_action(self.worlds[w].lvt(), gvt);
             self.post(msgs);
         } else {
             let m = self

@@ -8,7 +8,7 @@ use crate::exec::control::RunControl;
 use crate::exec::error::{ExecError, InputError};
 use crate::exec::reference::ReferenceRun;
 use crate::exec::sync::StdFacade;
-use crate::exec::threaded::{run_threaded_controlled, ThreadTimes, ThreadedSetup};
+use crate::exec::threaded::{run_threaded_controlled, ThreadTimes, ThreadedOptions, ThreadedSetup};
 use crate::exec::virtual_exec::VirtualRun;
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
@@ -256,10 +256,8 @@ impl<M: CellModel + 'static> Runner<M> {
                         inputs,
                         keep_frames: false,
                     },
-                    &options.kernel,
-                    options.threads.max(1),
-                    steps,
-                    wanted,
+                    &ThreadedOptions::new(&options.kernel, options.threads.max(1), steps)
+                        .wanted(wanted),
                     &mut on_frame,
                 )?;
                 let kernel = kernel_report(

@@ -1,0 +1,326 @@
+//! The per-step log of a world: for every step held, each own cell's state and output, the
+//! views of the margin cells, the migrations in, the inputs, and the messages received and
+//! sent (SPEC.md §K3); reading committed steps and fossil collection.
+
+use super::World;
+use crate::frame::Event;
+use crate::kernel::message::{Bodies, MessageKind};
+use crate::kernel::partition::WorldId;
+use crate::model::{BodyId, CellModel, Step};
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+
+/// Id-sorted states in one shared allocation (`None`: empty, nothing allocated). A cell's
+/// output and its state at the next step are the same allocation when every body stays in
+/// the cell and nothing else lands there — the common case, which then copies nothing.
+pub(super) type Shared<S> = Option<Arc<[S]>>;
+
+/// The states of `s` as a slice.
+pub(super) fn view<S>(s: &Shared<S>) -> &[S] {
+    s.as_deref().unwrap_or(&[])
+}
+
+/// `v` as shared states (`None` when empty).
+pub(super) fn share<S>(v: Vec<S>) -> Shared<S> {
+    (!v.is_empty()).then(|| Arc::from(v))
+}
+
+/// The output of one cell computation: the bodies it homes at the next step, sorted by
+/// (home cell, id), their home cells, and the events it raised.
+#[derive(Clone, Debug)]
+pub(super) struct Out<S, E> {
+    /// The cell computed.
+    pub(super) cell: u32,
+    pub(super) bodies: Shared<S>,
+    /// The home cell of each of `bodies`; empty exactly when every body stays in `cell`.
+    pub(super) homes: Vec<u32>,
+    pub(super) events: Vec<Event<E>>,
+    /// Whether a cell computation produced it (an empty cell's output is not computed).
+    pub(super) computed: bool,
+}
+
+impl<S, E> Out<S, E> {
+    pub(super) fn empty(cell: u32) -> Self {
+        Out {
+            cell,
+            bodies: None,
+            homes: Vec::new(),
+            events: Vec::new(),
+            computed: false,
+        }
+    }
+
+    pub(super) fn is_empty(&self) -> bool {
+        self.bodies.is_none() && self.events.is_empty()
+    }
+
+    /// Whether every body it homes stays in the cell computed.
+    pub(super) fn stays(&self) -> bool {
+        self.homes.is_empty()
+    }
+
+    /// `(home cell, state)` of every body, sorted by (cell, id).
+    pub(super) fn pairs(&self) -> impl Iterator<Item = (u32, &S)> + '_ {
+        view(&self.bodies)
+            .iter()
+            .enumerate()
+            .map(|(k, b)| (self.homes.get(k).copied().unwrap_or(self.cell), b))
+    }
+
+    /// The bodies homed in `cell`.
+    pub(super) fn landing_in(&self, cell: u32) -> &[S] {
+        let all = view(&self.bodies);
+        if self.stays() {
+            return if cell == self.cell { all } else { &[] };
+        }
+        let lo = self.homes.partition_point(|c| *c < cell);
+        let hi = self.homes.partition_point(|c| *c <= cell);
+        &all[lo..hi]
+    }
+}
+
+/// One received positive version: (sequence number, bodies, follows).
+pub(super) type Version<S> = (u32, Bodies<S>, bool);
+
+/// What a world has received under one identity (kind, step, source cell).
+#[derive(Debug)]
+pub(super) struct Recv<S> {
+    /// Live positive versions.
+    pub(super) positives: Vec<Version<S>>,
+    /// Anti-messages that arrived before their positive twin.
+    pub(super) antis: Vec<u32>,
+}
+
+impl<S> Default for Recv<S> {
+    fn default() -> Self {
+        Recv {
+            positives: Vec::new(),
+            antis: Vec::new(),
+        }
+    }
+}
+
+impl<S> Recv<S> {
+    /// The effective version: the live positive with the highest sequence number.
+    pub(super) fn effective(&self) -> Option<&Version<S>> {
+        self.positives.iter().max_by_key(|p| p.0)
+    }
+}
+
+/// The last version sent under one identity (kind, step, source cell, destination world).
+#[derive(Debug)]
+pub(super) struct Sent<S> {
+    pub(super) seq: u32,
+    pub(super) live: Option<Bodies<S>>,
+    /// The live version's `follows` flag.
+    pub(super) follows: bool,
+}
+
+/// Everything a world holds about one step.
+#[derive(Debug)]
+pub(super) struct Slot<S, E> {
+    pub(super) states: Vec<Shared<S>>,
+    pub(super) outs: Vec<Option<Out<S, E>>>,
+    pub(super) known: Vec<bool>,
+    /// The view of each margin cell (indexed like `World::margin`) at this step (K4: the
+    /// effective ghost of the step, else — optimistic modes — the view of the step before;
+    /// `None`: empty). Shared, not copied, between the steps that inherit it.
+    pub(super) ghosts: Vec<Option<Arc<Vec<S>>>>,
+    pub(super) ghost_known: BTreeSet<u32>,
+    pub(super) foreign_in: BTreeMap<(u32, u32), Vec<S>>,
+    pub(super) migrate_known: BTreeSet<u32>,
+    pub(super) recv: BTreeMap<(MessageKind, u32), Recv<S>>,
+    pub(super) sent: BTreeMap<(MessageKind, u32, WorldId), Sent<S>>,
+    pub(super) inputs: BTreeMap<u32, InputEntry<S>>,
+}
+
+/// An input applied to a slot: the ids it removes and the (home cell, state) it adds.
+pub(super) type InputEntry<S> = (Vec<BodyId>, Bodies<S>);
+
+impl<S: Clone, E: Clone> Slot<S, E> {
+    /// The state of own cell `x` (index in `World::cells`).
+    pub(super) fn state(&self, x: usize) -> &[S] {
+        view(&self.states[x])
+    }
+
+    /// An empty slot for `n` own cells and `m` margin cells.
+    pub(super) fn new(n: usize, m: usize) -> Self {
+        Slot {
+            states: vec![None; n],
+            outs: (0..n).map(|_| None).collect(),
+            known: vec![false; n],
+            ghosts: vec![None; m],
+            ghost_known: BTreeSet::new(),
+            foreign_in: BTreeMap::new(),
+            migrate_known: BTreeSet::new(),
+            recv: BTreeMap::new(),
+            sent: BTreeMap::new(),
+            inputs: BTreeMap::new(),
+        }
+    }
+
+    /// Bytes this slot holds. A ghost view shared with the slot before (`prev`, the same
+    /// `Arc`) is counted there only; inputs count their states and removed ids.
+    pub(super) fn bytes(&self, prev: Option<&Slot<S, E>>) -> usize {
+        let s = std::mem::size_of::<S>();
+        let p = std::mem::size_of::<(u32, S)>();
+        let v = std::mem::size_of::<Vec<S>>();
+        let h = std::mem::size_of::<Shared<S>>();
+        let mut b = self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1);
+        // A cell's states shared by its output and the next step's state count half at each.
+        let held = |a: &Arc<[S]>| (16 + a.len() * s) / Arc::strong_count(a);
+        b += self.states.iter().flatten().map(held).sum::<usize>();
+        for o in self.outs.iter().flatten() {
+            b += o.bodies.as_ref().map_or(0, held)
+                + o.homes.len() * 4
+                + o.events.len() * std::mem::size_of::<Event<E>>();
+        }
+        b += self.ghosts.len() * std::mem::size_of::<Option<Arc<Vec<S>>>>();
+        for (k, g) in self.ghosts.iter().enumerate() {
+            let Some(g) = g else { continue };
+            let shared = prev
+                .and_then(|p| p.ghosts[k].as_ref())
+                .is_some_and(|h| Arc::ptr_eq(g, h));
+            b += if shared { 0 } else { 16 + v + g.len() * s };
+        }
+        for (removes, adds) in self.inputs.values() {
+            b += 8 + removes.len() * 8 + adds.len() * p;
+        }
+        b += self
+            .foreign_in
+            .values()
+            .map(|g| v + 8 + g.len() * s)
+            .sum::<usize>();
+        // Message bodies are shared between the sender's log, the messages and the
+        // receivers' logs: each holder counts its share.
+        let share = |l: &Bodies<S>| (v + l.len() * p) / Arc::strong_count(l);
+        for r in self.recv.values() {
+            b += 16 + r.antis.len() * 4;
+            b += r.positives.iter().map(|x| 8 + share(&x.1)).sum::<usize>();
+        }
+        for x in self.sent.values() {
+            b += 24 + x.live.as_ref().map_or(0, share);
+        }
+        b + (self.ghost_known.len() + self.migrate_known.len()) * 8
+    }
+}
+
+/// [`World::sample_log_bytes`] measures the logs at every this many calls (and when they
+/// hold more steps than ever before).
+pub(super) const LOG_SAMPLE_EVERY: u64 = 16;
+
+impl<M: CellModel> World<M> {
+    /// The bodies of its cells at committed step `t` (any order).
+    pub fn state_at(&self, t: Step) -> impl Iterator<Item = &M::State> + '_ {
+        self.slot(t)
+            .into_iter()
+            .flat_map(|s| s.states.iter().flat_map(view))
+    }
+
+    /// Its own cells' states at step `t` (the non-empty cells, any order), shared with the
+    /// log rather than copied: for handing committed states to another thread.
+    pub fn shared_states_at(&self, t: Step) -> impl Iterator<Item = Arc<[M::State]>> + '_ {
+        self.slot(t)
+            .into_iter()
+            .flat_map(|s| s.states.iter().flatten().cloned())
+    }
+
+    /// Its view of the state of own cell `cell` at step `t`, if held.
+    pub fn cell_state(&self, cell: u32, t: Step) -> Option<&[M::State]> {
+        if !self.is_own(cell) {
+            return None;
+        }
+        self.slot(t)
+            .map(|s| s.state(self.part.local(cell) as usize))
+    }
+
+    pub(super) fn slot(&self, t: Step) -> Option<&Slot<M::State, M::Event>> {
+        t.checked_sub(self.base)
+            .and_then(|i| self.slots.get(i as usize))
+    }
+
+    /// The events of its cells' computations at step `s` (any order).
+    pub fn events_at(&self, s: Step) -> impl Iterator<Item = &Event<M::Event>> + '_ {
+        self.slot(s)
+            .into_iter()
+            .flat_map(|s| s.outs.iter().flatten().flat_map(|o| o.events.iter()))
+    }
+
+    /// Records that step `t` was committed (counts the committed cell computations at
+    /// `t − 1`).
+    pub fn note_committed(&mut self, t: Step) {
+        self.counters.steps_committed += 1;
+        if let Some(slot) = t.checked_sub(1).and_then(|p| self.slot(p)) {
+            self.counters.cells_committed +=
+                slot.states.iter().filter(|c| c.is_some()).count() as u64;
+        }
+    }
+
+    /// Bytes held by the logs now.
+    pub fn log_bytes(&self) -> u64 {
+        let mut prev = None;
+        let mut b = 0;
+        for s in &self.slots {
+            b += s.bytes(prev);
+            prev = Some(s);
+        }
+        b as u64
+    }
+
+    /// Number of steps the logs hold now.
+    pub fn steps_held(&self) -> u64 {
+        self.slots.len() as u64
+    }
+
+    /// Samples the log size into `peak_log_bytes` (SPEC.md §K9): measured at every
+    /// `LOG_SAMPLE_EVERY`-th call and whenever the logs hold more steps than at any call
+    /// before — the size grows with the steps held, and measuring every time cost ~1 % of a
+    /// run.
+    pub fn sample_log_bytes(&mut self) {
+        let held = self.steps_held();
+        let due = self.log_samples % LOG_SAMPLE_EVERY == 0 || held > self.most_held;
+        self.log_samples += 1;
+        self.most_held = self.most_held.max(held);
+        if due {
+            let b = self.log_bytes();
+            self.counters.peak_log_bytes = self.counters.peak_log_bytes.max(b);
+        }
+    }
+
+    /// Drops everything about steps before `keep_from` (pass GVT − 1: the states at GVT − 1
+    /// are final but computations at GVT − 1 may still be redone); with delta ghosts one
+    /// step more is kept (GVT − 2).
+    pub fn fossil_collect(&mut self, keep_from: Step) {
+        // Delta ghosts compare the states two steps before a ghost's step (K4): one more
+        // final step is kept.
+        let keep_from = if self.delta() {
+            keep_from.saturating_sub(1)
+        } else {
+            keep_from
+        };
+        let keep_from = keep_from.min(self.base + self.slots.len() as Step - 1);
+        while self.base < keep_from {
+            self.slots.pop_front();
+            self.base += 1;
+        }
+    }
+
+    pub(super) fn si(&self, t: Step) -> usize {
+        debug_assert!(t >= self.base, "step {t} below base {}", self.base);
+        (t - self.base) as usize
+    }
+
+    /// Creates the slots up to `t`. In the optimistic modes a new slot inherits the ghost
+    /// views of the step before (K4: no ghost means no change).
+    pub(super) fn ensure_slot(&mut self, t: Step) {
+        while self.base + (self.slots.len() as Step) <= t {
+            let mut slot = Slot::new(self.cells.len(), self.margin.len());
+            if self.delta() {
+                if let Some(last) = self.slots.back() {
+                    slot.ghosts = last.ghosts.clone();
+                }
+            }
+            self.slots.push_back(slot);
+        }
+    }
+}

@@ -1,0 +1,358 @@
+//! A world: one logical process owning a territory of cells (SPEC.md §World).
+//!
+//! Pure and single-threaded. An executor hands it messages ([`World::receive`]), lets it act
+//! ([`World::act`], which returns the messages it sends), asks for its GVT bound
+//! ([`World::bound`]), reads committed states and events, and fossil-collects.
+//!
+//! The unit of everything is *the state of a cell at a step*: the id-sorted states of the
+//! entities homed in that cell at that step. A world keeps, for every step from GVT − 1
+//! (GVT − 2 with delta ghosts) to its head, one slot holding, per own cell: its state, and
+//! the output of its computation (the bodies it homes at the next step, with their home
+//! cells, and its events); per foreign neighbour cell: its view (the ghost state received,
+//! or with delta ghosts the view of the step before); per (own destination cell, foreign
+//! source cell): the bodies migrating in; and the logs of messages received and sent.
+//!
+//! The state of own cell `d` at `t + 1` is rebuilt, whenever one of its inputs changes, as the
+//! id-sorted union of the outputs at `t` of the own cells around it that land in `d` and the
+//! migrations into `d` at `t + 1`. A change of a state at step `t` re-sends its ghost (lazily)
+//! and, if the world has already computed step `t`, makes the own cells around it dirty at
+//! `t` — that is a rollback. Re-executing a dirty cell compares the new output with the log;
+//! only a different output changes states at `t + 1` (early cut-off) and re-sends migrations.
+
+mod conservative;
+mod log;
+mod receive;
+mod recompute;
+mod send;
+mod territory;
+
+use self::log::Slot;
+use self::territory::Nb;
+use super::config::{GhostPolicy, KernelConfig, PlantedBug, RollbackMode};
+use super::counters::WorldCounters;
+use super::message::{Message, MessageKey, MessageKind, Sign};
+use super::partition::{Partition, WorldId};
+use super::trace::WorldTrace;
+use crate::grid::Grid;
+use crate::model::{CellModel, Step};
+use crate::state::CellStates;
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
+use std::sync::Arc;
+
+/// The kinds of a world's actions (SPEC.md §K5), for time accounting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ActionKind {
+    /// Apply the inbox (message exchange).
+    Receive,
+    /// Re-execute dirty steps (rollback).
+    Repair,
+    /// Compute forward (conservative mode: every action that is not a receive).
+    Compute,
+}
+
+/// One logical process (see the module doc).
+pub struct World<M: CellModel> {
+    id: WorldId,
+    model: Arc<M>,
+    grid: Arc<Grid>,
+    part: Arc<Partition>,
+    mode: RollbackMode,
+    window: Step,
+    bug: PlantedBug,
+    ghosts: GhostPolicy,
+    cells: Vec<u32>,
+    /// The foreign cells next to an own cell (ascending): the cells whose ghosts it keeps.
+    margin: Vec<u32>,
+    /// Per own cell, its 27-neighbourhood resolved once: where each neighbour's state is.
+    nbrs: Vec<[Nb; 27]>,
+    targets: Vec<Vec<WorldId>>,
+    /// The other worlds owning a cell next to one of its own (ascending): the worlds it
+    /// exchanges ghosts with.
+    neighbours: Vec<WorldId>,
+    base: Step,
+    head: Step,
+    end: Step,
+    next: Vec<Step>,
+    next_min: Step,
+    idle_at: Option<Step>,
+    slots: VecDeque<Slot<M::State, M::Event>>,
+    dirty: BTreeMap<Step, BTreeSet<u32>>,
+    inbox: BTreeMap<MessageKey, Message<M::State>>,
+    counters: WorldCounters,
+    /// Calls of [`World::sample_log_bytes`] so far, and the most steps held at one of them
+    /// (the log size is measured at every [`log::LOG_SAMPLE_EVERY`]-th call, and whenever the
+    /// logs hold more steps than ever before).
+    log_samples: u64,
+    most_held: u64,
+    scratch: Vec<M::State>,
+    /// Scratch for `compute`: the home cell of each body it produced.
+    homes_scratch: Vec<u32>,
+    record: Option<WorldTrace>,
+    /// The step the world started from (0, or its last reterritory): ghosts of this step
+    /// carry the whole state; later ones only changes (K4, delta ghosts).
+    origin: Step,
+    /// Ghosts to (re)evaluate at the end of the current action, as (step, own cell index).
+    ghost_due: BTreeSet<(Step, usize)>,
+}
+
+impl<M: CellModel> World<M> {
+    /// World `id` of `part`, starting at step 0 from `initial` (binned over `grid`).
+    pub fn new(
+        id: WorldId,
+        model: Arc<M>,
+        grid: Arc<Grid>,
+        part: Arc<Partition>,
+        config: &KernelConfig,
+        initial: &CellStates<M::State>,
+    ) -> Self {
+        Self::at_step(id, model, grid, part, config, initial, 0)
+    }
+
+    /// Load balancing's handover (SPEC.md §K13): the world takes the territory `part`
+    /// gives it at step `step`, which every world has committed (GVT = `step` + 1, so every
+    /// state at `step` is final and nothing later was committed). Its logs restart at `step`
+    /// from `states`, the whole domain's final states there, exactly as a world started at
+    /// `step` would hold them: the final state of a cell is its whole log at GVT, and it
+    /// moves with the cell. Speculative states, messages, dirty steps and the inbox are
+    /// dropped; [`World::start`] then sends the ghosts of `step` under the new owner map.
+    /// Counters and the trace carry on; the end is reset to `step` (raise it with
+    /// [`World::set_end`]).
+    pub fn reterritory(&mut self, part: Arc<Partition>, states: &CellStates<M::State>, step: Step) {
+        let config = KernelConfig {
+            mode: self.mode,
+            window: self.window,
+            planted_bug: self.bug,
+            ghosts: self.ghosts,
+            ..KernelConfig::default()
+        };
+        let mut fresh = Self::at_step(
+            self.id,
+            self.model.clone(),
+            self.grid.clone(),
+            part,
+            &config,
+            states,
+            step,
+        );
+        fresh.counters = std::mem::take(&mut self.counters);
+        fresh.record = self.record.take();
+        *self = fresh;
+    }
+
+    /// Starts (or stops) recording this world's part of a run trace ([`WorldTrace`]).
+    pub fn set_recording(&mut self, on: bool) {
+        self.record = on.then(WorldTrace::default);
+    }
+
+    /// Sets the time stamped on what the trace records next (seconds since the run started).
+    pub fn trace_time(&mut self, now: f64) {
+        if let Some(r) = &mut self.record {
+            r.set_time(now);
+        }
+    }
+
+    /// The trace recorded so far (empty if recording is off); recording continues.
+    pub fn take_record(&mut self) -> WorldTrace {
+        self.record.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
+    /// This world's head: its states exist up to this step (optimistic modes).
+    pub fn head(&self) -> Step {
+        self.head
+    }
+
+    /// This world's id.
+    pub fn id(&self) -> WorldId {
+        self.id
+    }
+
+    /// The cells it owns (linear indices, ascending).
+    pub fn cells(&self) -> &[u32] {
+        &self.cells
+    }
+
+    /// The other worlds owning a cell next to one of its own (ascending): those it exchanges
+    /// ghosts with, so the only ones whose progress its own computations wait for.
+    pub fn neighbours(&self) -> &[WorldId] {
+        &self.neighbours
+    }
+
+    /// Whether its ghosts are deltas (optimistic modes with [`GhostPolicy::Delta`]): no
+    /// ghost means unchanged, views are inherited from the step before (K4).
+    fn delta(&self) -> bool {
+        self.mode != RollbackMode::Conservative && self.ghosts == GhostPolicy::Delta
+    }
+
+    /// Its counters.
+    pub fn counters(&self) -> &WorldCounters {
+        &self.counters
+    }
+
+    /// Lets the world compute up to (not including) step `end`, i.e. produce states up to
+    /// `end`.
+    pub fn set_end(&mut self, end: Step) {
+        self.end = self.end.max(end);
+    }
+
+    /// The initial messages: ghosts of the border cells at the starting step (0, or the
+    /// step of the last [`World::reterritory`]).
+    pub fn start(&mut self) -> Vec<Message<M::State>> {
+        let mut out = Vec::new();
+        let step = self.base;
+        for x in 0..self.cells.len() {
+            self.send_ghost(x, step, &mut out);
+        }
+        if let Some(r) = &mut self.record {
+            for m in &out {
+                r.sent(m.step, m.is_anti());
+            }
+        }
+        out
+    }
+
+    /// Local virtual time: the next step this world will (re)compute (optimistic modes), or
+    /// the smallest next step over its cells (conservative).
+    pub fn lvt(&self) -> Step {
+        if self.mode == RollbackMode::Conservative {
+            self.next_min
+        } else {
+            let d = self.dirty.keys().next().copied().unwrap_or(Step::MAX);
+            self.head.min(d)
+        }
+    }
+
+    /// The highest step any of its states may have reached: its head (optimistic modes), or
+    /// the largest next step of its cells (conservative; no state beyond it is known yet).
+    pub fn frontier(&self) -> Step {
+        if self.mode == RollbackMode::Conservative {
+            self.next.iter().copied().max().unwrap_or(0)
+        } else {
+            self.head
+        }
+    }
+
+    /// Its GVT bound (see [`crate::kernel::gvt`]): `lvt() + 1` and the `affects` step of every
+    /// unprocessed message.
+    pub fn bound(&self) -> Step {
+        // The smallest `affects` in the inbox: its first key has the smallest step `s`; a
+        // ghost of `s` affects `s + 1`, anything else of `s` affects `s`.
+        let inbox = match self.inbox.keys().next() {
+            None => Step::MAX,
+            Some(&(s, kind, ..)) => {
+                let non_ghost = kind == MessageKind::Input
+                    || self
+                        .inbox
+                        .range((s, MessageKind::Migrate, 0, 0, Sign::Anti)..)
+                        .next()
+                        .is_some_and(|(k, _)| k.0 == s);
+                if non_ghost {
+                    s
+                } else {
+                    s + 1
+                }
+            }
+        };
+        debug_assert_eq!(
+            inbox,
+            self.inbox
+                .values()
+                .map(|m| m.affects())
+                .min()
+                .unwrap_or(Step::MAX)
+        );
+        self.lvt().saturating_add(1).min(inbox)
+    }
+
+    /// Puts a message in the inbox. It is applied at the next [`World::act`], in the total
+    /// order of [`MessageKey`].
+    pub fn receive(&mut self, msg: Message<M::State>) {
+        debug_assert_eq!(msg.dst_world, self.id);
+        self.idle_at = None;
+        let prev = self.inbox.insert(msg.key(), msg);
+        debug_assert!(prev.is_none(), "duplicate message");
+    }
+
+    /// Whether messages wait in the inbox.
+    pub fn has_inbox(&self) -> bool {
+        !self.inbox.is_empty()
+    }
+
+    /// Whether its next action would only compute forward (no message to apply, no cell to
+    /// re-execute): the speculative kind of work an executor may postpone.
+    pub fn only_advances(&self) -> bool {
+        self.inbox.is_empty() && self.dirty.is_empty()
+    }
+
+    /// What the next [`act`](Self::act) will do: apply the inbox, repair dirty steps
+    /// (Rollback and Propagate) or compute forward.
+    pub fn next_action(&self) -> ActionKind {
+        if !self.inbox.is_empty() {
+            ActionKind::Receive
+        } else if !self.dirty.is_empty() {
+            ActionKind::Repair
+        } else {
+            ActionKind::Compute
+        }
+    }
+
+    /// Whether acting now may do something. In conservative mode an action may still find
+    /// every cell waiting for its neighbours; after such an idle action the world does not
+    /// want to act again until it receives a message or GVT changes.
+    pub fn wants_to_act(&self, gvt: Step) -> bool {
+        if !self.inbox.is_empty() {
+            return true;
+        }
+        let lvt = self.lvt();
+        if self.mode == RollbackMode::Conservative {
+            // After an action that could not compute anything, only news (a message) or a
+            // wider window (a new GVT) can unblock a cell.
+            self.idle_at != Some(gvt) && lvt < self.end && lvt + 1 < gvt + self.window
+        } else {
+            !self.dirty.is_empty() || (self.head < self.end && self.head + 1 < gvt + self.window)
+        }
+    }
+
+    /// One action: apply the whole inbox in key order if it is not empty; otherwise
+    /// re-execute the dirty steps up to the head (Rollback and Propagate), or compute the next
+    /// step if the window allows. Returns the messages sent. (Receiving and computing are
+    /// separate actions, so a schedule can let every world apply its news before anyone
+    /// computes.)
+    pub fn act(&mut self, gvt: Step) -> Vec<Message<M::State>> {
+        let mut out = Vec::new();
+        if self.mode == RollbackMode::Conservative {
+            self.act_conservative(gvt, &mut out);
+        } else {
+            self.act_optimistic(gvt, &mut out);
+            self.flush_ghosts(&mut out);
+        }
+        if self.record.is_some() {
+            let lvt = self.lvt();
+            if let Some(r) = &mut self.record {
+                for m in &out {
+                    r.sent(m.step, m.is_anti());
+                }
+                r.sample_lvt(self.id, lvt);
+            }
+        }
+        out
+    }
+
+    fn act_optimistic(&mut self, gvt: Step, out: &mut Vec<Message<M::State>>) {
+        if !self.inbox.is_empty() {
+            self.drain_inbox();
+        } else if !self.dirty.is_empty() {
+            // Rollback and Propagate runs to the head in one action (thesis Algorithm 2), so
+            // other worlds see the repaired outputs as early as possible.
+            while let Some(&s) = self.dirty.keys().next() {
+                self.reexecute(s, out);
+            }
+            if let Some(r) = &mut self.record {
+                r.repaired();
+            }
+        } else if self.head < self.end && self.head + 1 < gvt + self.window {
+            self.advance(out);
+        } else {
+            self.counters.idle_acts += 1;
+        }
+    }
+}

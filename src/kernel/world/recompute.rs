@@ -1,0 +1,415 @@
+//! Computing and recomputing: a cell's computation, building the states of the next step
+//! from outputs and migrations, marking the cells that read a changed state dirty, and
+//! Rollback-and-Propagate's re-execution with early cut-off (SPEC.md §K4, §K5).
+
+use super::log::{share, view, Out, Shared};
+use super::territory::Nb;
+use super::World;
+use crate::frame::{Event, LeftGrid};
+use crate::kernel::config::{PlantedBug, RollbackMode};
+use crate::kernel::message::Message;
+use crate::kernel::partition::WorldId;
+use crate::model::{BodyId, CellModel, Neighbourhood, Step};
+use std::collections::BTreeSet;
+
+/// The entities that differ between two id-sorted states of one cell: both versions of an
+/// entity whose bits changed, and every entity present on one side only.
+fn changed_entities<'a, M: CellModel>(
+    old: &'a [M::State],
+    new: &'a [M::State],
+) -> Vec<&'a M::State> {
+    let (mut i, mut j) = (0, 0);
+    let mut changed = Vec::new();
+    while i < old.len() || j < new.len() {
+        match (old.get(i), new.get(j)) {
+            (Some(a), Some(b)) if M::id(a) == M::id(b) => {
+                if !M::same_bits(a, b) {
+                    changed.extend([a, b]);
+                }
+                i += 1;
+                j += 1;
+            }
+            (Some(a), Some(b)) if M::id(a) > M::id(b) => {
+                changed.push(b);
+                j += 1;
+            }
+            (Some(a), _) => {
+                changed.push(a);
+                i += 1;
+            }
+            (None, Some(b)) => {
+                changed.push(b);
+                j += 1;
+            }
+            (None, None) => unreachable!("the loop runs while one side has entities"),
+        }
+    }
+    changed
+}
+
+impl<M: CellModel> World<M> {
+    /// Computes own cell `x` at step `s` from the states and ghosts held for `s`.
+    pub(super) fn compute(&mut self, x: usize, s: Step) -> Out<M::State, M::Event> {
+        let cell = self.cells[x];
+        let grid = &*self.grid;
+        let slot = &self.slots[(s - self.base) as usize];
+        let c = grid.coord(cell as usize);
+        let nbrs = &self.nbrs[x];
+        let cells: [&[M::State]; 27] = std::array::from_fn(|k| match nbrs[k] {
+            Nb::Outside => &[][..],
+            Nb::Own(l) => slot.state(l as usize),
+            Nb::Margin(m) => slot.ghosts[m as usize].as_ref().map_or(&[][..], |v| &v[..]),
+        });
+        let nb = Neighbourhood { centre: c, cells };
+        let mut events = Vec::new();
+        self.scratch.clear();
+        self.model
+            .step_cell(s, grid, &nb, &mut self.scratch, &mut events);
+        if !self.scratch.is_sorted_by_key(|b| M::id(b)) {
+            self.scratch.sort_by_key(|b| M::id(b));
+        }
+        // Each body's home cell at s + 1 (`u32::MAX`: it left the domain).
+        let homes = &mut self.homes_scratch;
+        homes.clear();
+        let mut stays = true;
+        for b in &self.scratch {
+            match grid.cell_of(M::position(b)) {
+                Some(d) => {
+                    assert!(
+                        d.chebyshev(c) <= 1,
+                        "locality contract violated: body {} moved from cell {c:?} to {d:?} in one step",
+                        M::id(b)
+                    );
+                    let d = grid.index(d) as u32;
+                    stays &= d == cell;
+                    homes.push(d);
+                }
+                None => {
+                    stays = false;
+                    homes.push(u32::MAX);
+                    events.push(Event {
+                        step: s,
+                        body: M::id(b),
+                        kind: LeftGrid.into(),
+                    });
+                }
+            }
+        }
+        self.counters.cells_computed += 1;
+        if stays {
+            // The common case: one allocation, written once, shared with the next state.
+            let bodies = (!self.scratch.is_empty()).then(|| self.scratch.drain(..).collect());
+            return Out {
+                cell,
+                bodies,
+                homes: Vec::new(),
+                events,
+                computed: true,
+            };
+        }
+        // Sorted by (home cell, id), without the bodies that left the domain.
+        let mut order: Vec<usize> = (0..homes.len()).filter(|&k| homes[k] != u32::MAX).collect();
+        let scratch = &self.scratch;
+        order.sort_by_key(|&k| (homes[k], M::id(&scratch[k])));
+        let mut out_homes: Vec<u32> = order.iter().map(|&k| homes[k]).collect();
+        if out_homes.iter().all(|&d| d == cell) {
+            out_homes.clear();
+        }
+        let bodies =
+            (!order.is_empty()).then(|| order.iter().map(|&k| scratch[k].clone()).collect());
+        self.scratch.clear();
+        Out {
+            cell,
+            bodies,
+            homes: out_homes,
+            events,
+            computed: true,
+        }
+    }
+
+    /// Whether two outputs are the same (early cut-off and lazy cancellation compare
+    /// entities with [`World::same_entity`]).
+    pub(super) fn same_out(
+        &self,
+        a: &Out<M::State, M::Event>,
+        b: &Out<M::State, M::Event>,
+    ) -> bool {
+        let (x, y) = (view(&a.bodies), view(&b.bodies));
+        a.events == b.events
+            && a.homes == b.homes
+            && x.len() == y.len()
+            && x.iter().zip(y).all(|(p, q)| self.same_entity(p, q))
+    }
+
+    pub(super) fn same_pairs(&self, a: &[(u32, M::State)], b: &[(u32, M::State)]) -> bool {
+        a.len() == b.len()
+            && a.iter()
+                .zip(b)
+                .all(|(x, y)| x.0 == y.0 && self.same_entity(&x.1, &y.1))
+    }
+
+    /// Bit equality of two entity states — or, under the planted bug
+    /// [`PlantedBug::CutoffByIdsOnly`], equality of their ids only.
+    pub(super) fn same_entity(&self, a: &M::State, b: &M::State) -> bool {
+        if self.bug == PlantedBug::CutoffByIdsOnly {
+            M::id(a) == M::id(b)
+        } else {
+            M::same_bits(a, b)
+        }
+    }
+
+    pub(super) fn same_states(a: &[M::State], b: &[M::State]) -> bool {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| M::same_bits(x, y))
+    }
+
+    /// Rebuilds the state of own cell `d` at `t ≥ base + 1` from the outputs at `t − 1` of the
+    /// own cells around it and the migrations into it. Returns the previous state if it
+    /// changed.
+    pub(super) fn rebuild_state(&mut self, d: u32, t: Step) -> Option<Shared<M::State>> {
+        let grid = &*self.grid;
+        let part = &*self.part;
+        let prev = &self.slots[(t - 1 - self.base) as usize];
+        let cur = &self.slots[(t - self.base) as usize];
+        let mut v: Vec<M::State> = Vec::new();
+        for n in grid.neighbours(grid.coord(d as usize)) {
+            let ni = grid.index(n) as u32;
+            if part.owner(ni) == self.id {
+                if let Some(o) = &prev.outs[part.local(ni) as usize] {
+                    v.extend(o.landing_in(d).iter().cloned());
+                }
+            }
+        }
+        for (_, bs) in cur.foreign_in.range((d, 0)..=(d, u32::MAX)) {
+            v.extend(bs.iter().cloned());
+        }
+        if !cur.inputs.is_empty() {
+            let removed: BTreeSet<BodyId> = cur
+                .inputs
+                .values()
+                .flat_map(|i| i.0.iter().copied())
+                .collect();
+            v.retain(|b| !removed.contains(&M::id(b)));
+            for (_, adds) in cur.inputs.values() {
+                v.extend(adds.iter().filter(|p| p.0 == d).map(|p| p.1.clone()));
+            }
+        }
+        v.sort_by_key(|b| M::id(b));
+        let ld = part.local(d) as usize;
+        let i = (t - self.base) as usize;
+        if Self::same_states(&v, self.slots[i].state(ld)) {
+            return None;
+        }
+        Some(std::mem::replace(&mut self.slots[i].states[ld], share(v)))
+    }
+
+    /// The own cells around `cell` whose computation at `s` must be redone because the state
+    /// of `cell` at `s` changed from `old` to `new`: `cell` itself if it is own and can produce
+    /// something (occupied now, or produced something before); every other own neighbour
+    /// that can produce something — in cell mode, only if one of its entities may read a
+    /// changed entity (`CellModel::may_affect`, SPEC.md §K4) or it is empty but produced
+    /// something before.
+    pub(super) fn cells_reading(
+        &self,
+        cell: u32,
+        s: Step,
+        old: &[M::State],
+        new: &[M::State],
+    ) -> Vec<u32> {
+        let i = self.si(s);
+        let slot = &self.slots[i];
+        let filter = self.mode == RollbackMode::Cell;
+        let changed = if filter {
+            changed_entities::<M>(old, new)
+        } else {
+            Vec::new()
+        };
+        let mut reading = Vec::new();
+        for n in self.grid.neighbours(self.grid.coord(cell as usize)) {
+            let ni = self.grid.index(n) as u32;
+            if !self.is_own(ni) {
+                continue;
+            }
+            let x = self.part.local(ni) as usize;
+            let state = slot.state(x);
+            let produced = slot.outs[x].as_ref().is_some_and(|o| !o.is_empty());
+            let reads = if !filter || ni == cell {
+                !state.is_empty() || produced
+            } else {
+                (state.is_empty() && produced)
+                    || state
+                        .iter()
+                        .any(|r| changed.iter().any(|c| self.model.may_affect(r, c)))
+            };
+            if reads {
+                reading.push(x as u32);
+            }
+        }
+        reading
+    }
+
+    /// Marks the own `cells` dirty at step `s < head`. Returns whether there were any.
+    pub(super) fn mark_dirty(&mut self, s: Step, cells: Vec<u32>) -> bool {
+        if cells.is_empty() {
+            return false;
+        }
+        self.dirty.entry(s).or_default().extend(cells);
+        true
+    }
+
+    /// The state of own cell `d` at `t ≤ head` changed from `old`: re-send its ghost, and if
+    /// step `t` was computed, dirty the cells reading it. Returns whether something became
+    /// dirty.
+    pub(super) fn on_state_change(&mut self, d: u32, t: Step, old: Shared<M::State>) -> bool {
+        let x = self.part.local(d) as usize;
+        self.ghost_due.insert((t, x));
+        if self.delta() {
+            // The ghosts of `t + 1` and `t + 2` depend on whether the state changed at `t`
+            // and at `t + 1`.
+            for u in t + 1..=(t + 2).min(self.head) {
+                self.ghost_due.insert((u, x));
+            }
+        }
+        if t >= self.head {
+            return false;
+        }
+        let i = self.si(t);
+        let cells = self.cells_reading(d, t, view(&old), self.slots[i].state(x));
+        self.mark_dirty(t, cells)
+    }
+
+    /// Re-executes the dirty cells of step `s` (optimistic modes).
+    pub(super) fn reexecute(&mut self, s: Step, out: &mut Vec<Message<M::State>>) {
+        let cells = self.dirty.remove(&s).unwrap_or_default();
+        self.counters.steps_computed += 1;
+        self.counters.steps_reexecuted += 1;
+        let i = self.si(s);
+        let mut changed_dst: BTreeSet<u32> = BTreeSet::new();
+        let mut changed_mig: BTreeSet<(usize, WorldId)> = BTreeSet::new();
+        for x in cells {
+            let x = x as usize;
+            let new = if self.slots[i].state(x).is_empty() {
+                Out::empty(self.cells[x])
+            } else {
+                self.counters.cells_recomputed += 1;
+                if let Some(r) = &mut self.record {
+                    r.recomputed(s, self.cells[x]);
+                }
+                self.compute(x, s)
+            };
+            let mut old = self.slots[i].outs[x]
+                .take()
+                .unwrap_or_else(|| Out::empty(self.cells[x]));
+            // The earlier computation of this cell-step is superseded (its result is kept
+            // only if equal, and then it stands for the new computation).
+            self.counters.cells_rolled_back += old.computed as u64;
+            if self.same_out(&old, &new) {
+                old.computed = new.computed;
+                self.slots[i].outs[x] = Some(old);
+                continue;
+            }
+            for (d, _) in old.pairs().chain(new.pairs()) {
+                if self.is_own(d) {
+                    changed_dst.insert(d);
+                } else {
+                    changed_mig.insert((x, self.part.owner(d)));
+                }
+            }
+            self.slots[i].outs[x] = Some(new);
+        }
+        for d in changed_dst {
+            if let Some(old) = self.rebuild_state(d, s + 1) {
+                self.on_state_change(d, s + 1, old);
+            }
+        }
+        for (x, w) in changed_mig {
+            self.send_migrate(x, s, w, out);
+        }
+    }
+
+    /// Computes step `head` → `head + 1` for every own cell (optimistic modes).
+    pub(super) fn advance(&mut self, out: &mut Vec<Message<M::State>>) {
+        let h = self.head;
+        self.ensure_slot(h + 1);
+        self.counters.steps_computed += 1;
+        let i = self.si(h);
+        let n = self.cells.len();
+        // How many own cells' outputs land in each own cell (each output counted once).
+        let mut landings = vec![0u32; n];
+        let mut migs: BTreeSet<(usize, WorldId)> = BTreeSet::new();
+        for x in 0..n {
+            let o = if self.slots[i].state(x).is_empty() {
+                Out::empty(self.cells[x])
+            } else {
+                self.compute(x, h)
+            };
+            if o.stays() {
+                landings[x] += o.bodies.is_some() as u32;
+            } else {
+                let mut last = None;
+                for &d in &o.homes {
+                    if last == Some(d) {
+                        continue;
+                    }
+                    last = Some(d);
+                    if self.is_own(d) {
+                        landings[self.part.local(d) as usize] += 1;
+                    } else {
+                        migs.insert((x, self.part.owner(d)));
+                    }
+                }
+            }
+            self.slots[i].outs[x] = Some(o);
+        }
+        // The state at h + 1 of a cell whose own output alone lands in it is that output (one
+        // shared allocation, no copy). The other cells that something lands in, those that
+        // also receive early migrations, and every cell when inputs apply at h + 1, take the
+        // general rule (`rebuild_state`). Either way a state is the id-sorted union (K1).
+        let part = &*self.part;
+        let id = self.id;
+        let next = &self.slots[i + 1];
+        let mut general: BTreeSet<u32> = next
+            .foreign_in
+            .keys()
+            .map(|k| k.0)
+            .chain(
+                next.inputs
+                    .values()
+                    .flat_map(|x| x.1.iter().map(|p| p.0))
+                    .filter(|&c| part.owner(c) == id),
+            )
+            .collect();
+        // Inputs at h + 1 (rare) may remove ids from any cell: every cell takes the general
+        // rule then.
+        let inputs = !next.inputs.is_empty();
+        for (x, &k) in landings.iter().enumerate() {
+            if k == 0 {
+                continue;
+            }
+            let alone = k == 1
+                && self.slots[i].outs[x]
+                    .as_ref()
+                    .is_some_and(|o| o.stays() && o.bodies.is_some());
+            if inputs || !alone || general.contains(&self.cells[x]) {
+                general.insert(self.cells[x]);
+                continue;
+            }
+            debug_assert!(self.slots[i + 1].states[x].is_none());
+            let bodies = self.slots[i].outs[x]
+                .as_ref()
+                .and_then(|o| o.bodies.clone());
+            self.slots[i + 1].states[x] = bodies;
+        }
+        for d in general {
+            self.rebuild_state(d, h + 1);
+        }
+        self.head = h + 1;
+        for (x, w) in migs {
+            self.send_migrate(x, h, w, out);
+        }
+        for x in 0..n {
+            if !self.targets[x].is_empty() {
+                self.send_ghost(x, h + 1, out);
+            }
+        }
+    }
+}
