@@ -1,4 +1,4 @@
-//! External inputs (spawn, remove, replace) at a step: committed states equal a reference
+//! External inputs (spawn, remove, replace, edit) at a step: committed states equal a reference
 //! that applies the same inputs to its state at that step, whatever the mode, partition and
 //! schedule — scripted before the run, and injected during the run (then they arrive as
 //! stragglers in the optimistic modes).
@@ -9,24 +9,41 @@
 
 use soda::exec::virtual_exec::VirtualRun;
 use soda::kernel::synthetic::{Particle, Particles};
-use soda::kernel::{Input, KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::kernel::{Edit, Input, KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::prelude::{ExecError, InputError, RunOptions, Runner};
 use soda::{Grid, ReferenceRun};
 
-/// At one step all removals apply first, then all additions (the kernel's rule).
+/// At one step all edits apply first (each to the state its entity has), then all removals,
+/// then all additions (the kernel's rule).
 fn apply(bodies: &mut Vec<Particle>, inputs: &[&Input<Particle>]) {
+    for i in inputs {
+        if let Input::Edit(id, edit) = i {
+            if let Some(b) = bodies.iter_mut().find(|b| b.id == *id) {
+                *b = edit.apply(b);
+            }
+        }
+    }
     for i in inputs {
         match i {
             Input::Remove(id) => bodies.retain(|b| b.id != *id),
             Input::Replace(s) => bodies.retain(|b| b.id != s.id),
-            Input::Spawn(_) => {}
+            Input::Spawn(_) | Input::Edit(..) => {}
         }
     }
     for i in inputs {
         match i {
             Input::Spawn(s) | Input::Replace(s) => bodies.push(s.clone()),
-            Input::Remove(_) => {}
+            Input::Remove(_) | Input::Edit(..) => {}
         }
     }
+}
+
+/// An edit that turns a particle around and slows it (its position, hence its cell, kept).
+fn reverse() -> Edit<Particle> {
+    Edit::new(|p: &Particle| Particle {
+        vel: [-0.5 * p.vel[0], -0.5 * p.vel[1], p.vel[2] + 0.05],
+        ..p.clone()
+    })
 }
 
 fn reference_with_inputs(
@@ -70,8 +87,13 @@ fn script() -> Vec<(u64, Input<Particle>)> {
     vec![
         (3, Input::Spawn(p(1000, [1.5, 1.5, 1.5], [0.1, 0.0, 0.0]))),
         (3, Input::Spawn(p(1001, [3.2, 0.4, 1.1], [0.0, 0.2, 0.0]))),
+        (5, Input::Edit(2, reverse())),
         (6, Input::Remove(4)),
+        (6, Input::Edit(4, reverse())),
         (9, Input::Replace(p(7, [2.5, 1.0, 0.5], [-0.2, 0.1, 0.0]))),
+        (9, Input::Edit(9, reverse())),
+        (11, Input::Edit(1000, reverse())),
+        (11, Input::Edit(9, reverse())),
         (14, Input::Remove(1000)),
         (17, Input::Replace(p(11, [0.5, 0.5, 1.5], [0.25, 0.0, 0.0]))),
     ]
@@ -136,6 +158,7 @@ fn inputs_injected_during_the_run_are_stragglers_that_roll_back_and_commit_corre
             };
             let inputs = vec![
                 (at, Input::Spawn(p(500, [2.5, 1.5, 0.5], [0.0, -0.1, 0.0]))),
+                (at + 1, Input::Edit(6, reverse())),
                 (at + 2, Input::Remove(3)),
             ];
             for (t, i) in &inputs {
@@ -159,4 +182,67 @@ fn inputs_injected_during_the_run_are_stragglers_that_roll_back_and_commit_corre
         }
     }
     assert!(rolled_back > 0, "late inputs caused rollbacks");
+}
+
+/// Edits (functions of the entity's state at their step) commit the same bits on every
+/// executor, scripted before the run.
+#[test]
+fn edits_commit_the_same_bits_on_every_executor() {
+    let (m, g, b) = Particles::scene(60, [4, 2, 2], false, 31);
+    let inputs: Vec<(u64, Input<Particle>)> = (1..12)
+        .map(|k| (2 * k, Input::Edit((5 * k) % 60, reverse())))
+        .collect();
+    let run = |options: RunOptions| {
+        Runner::new(m.clone(), g.clone(), b.clone())
+            .options(options)
+            .inputs(inputs.clone())
+            .run_quiet(30)
+            .unwrap()
+            .hash
+    };
+    let reference = run(RunOptions::reference());
+    let unedited = Runner::new(m.clone(), g.clone(), b.clone())
+        .run_quiet(30)
+        .unwrap()
+        .hash;
+    assert_ne!(reference, unedited, "the edits changed the run");
+    for mode in modes() {
+        let cfg = KernelConfig::new(3).mode(mode).window(6);
+        assert_eq!(
+            run(RunOptions::virtual_exec(cfg.clone())),
+            reference,
+            "{mode:?}"
+        );
+        assert_eq!(run(RunOptions::threaded(cfg, 2)), reference, "{mode:?}");
+    }
+}
+
+/// An edit that moves its entity to another cell is refused: an input error on the
+/// reference, a world's failure on the Time Warp executors — never a silently misplaced
+/// entity.
+#[test]
+fn an_edit_that_moves_its_entity_out_of_its_cell_is_an_error() {
+    let (m, g, b) = Particles::scene(30, [4, 2, 2], false, 32);
+    let id = b[0].id;
+    let teleport = Edit::new(|p: &Particle| Particle {
+        pos: [p.pos[0] + 2.0, p.pos[1], p.pos[2]],
+        ..p.clone()
+    });
+    let run = |options: RunOptions| {
+        Runner::new(m.clone(), g.clone(), b.clone())
+            .options(options)
+            .input(1, Input::Edit(id, teleport.clone()))
+            .run_quiet(5)
+    };
+    match run(RunOptions::reference()) {
+        Err(ExecError::Input(InputError::EditLeftCell { step: 1, id: got })) => assert_eq!(got, id),
+        other => panic!("expected EditLeftCell, got {other:?}"),
+    }
+    for options in [
+        RunOptions::virtual_exec(KernelConfig::new(2)),
+        RunOptions::threaded(KernelConfig::new(2), 2),
+    ] {
+        let err = run(options).expect_err("an edit out of its cell is an error");
+        assert!(err.to_string().contains("out of its home cell"), "{err}");
+    }
 }

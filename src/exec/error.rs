@@ -61,6 +61,15 @@ pub enum InputError {
         /// The earliest step an input may still name.
         earliest: Step,
     },
+    /// An edit moved its entity out of its home cell (edits change a state in place; use a
+    /// replacement to move an entity).
+    #[error("an input at step {step} edits entity {id} out of its home cell: an edit must keep the entity in its cell (replace the state to move it)")]
+    EditLeftCell {
+        /// The input's step.
+        step: Step,
+        /// The entity.
+        id: BodyId,
+    },
     /// An added entity's home position lies outside the grid.
     #[error("an input at step {step} adds entity {id} at {position:?}, outside the grid")]
     OutsideGrid {

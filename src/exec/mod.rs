@@ -58,10 +58,15 @@ pub(crate) fn input_message<M: CellModel>(
     input: crate::kernel::Input<M::State>,
     seq: u32,
 ) -> crate::kernel::Message<M::State> {
+    let mut edits = Vec::new();
     let (removes, adds) = match input {
         crate::kernel::Input::Spawn(s) => (Vec::new(), vec![s]),
         crate::kernel::Input::Remove(id) => (vec![id], Vec::new()),
         crate::kernel::Input::Replace(s) => (vec![M::id(&s)], vec![s]),
+        crate::kernel::Input::Edit(id, edit) => {
+            edits.push((id, edit));
+            (Vec::new(), Vec::new())
+        }
     };
     let bodies: Vec<(u32, M::State)> = adds
         .into_iter()
@@ -82,6 +87,7 @@ pub(crate) fn input_message<M: CellModel>(
         seq,
         bodies: bodies.into(),
         removes,
+        edits,
         follows: false,
     }
 }

@@ -183,7 +183,7 @@ impl<M: CellModel> ReferenceRun<M> {
         }
         let step = self.step + 1;
         if let Some(inputs) = self.inputs.remove(&step) {
-            next = apply_inputs::<M>(next, &inputs);
+            next = apply_inputs::<M>(&self.grid, step, next, &inputs)?;
         }
         self.state = CellStates::binned::<M>(&self.grid, next, self.step, &mut events);
         if self.check {
@@ -200,18 +200,33 @@ impl<M: CellModel> ReferenceRun<M> {
     }
 }
 
-/// The states after the inputs of one step: every removed (or replaced) id goes first,
-/// then the added states are appended in input order (SPEC.md §K12).
+/// The states after the inputs of step `step`: edits first (in input order, each to the
+/// state its entity has then), then every removed (or replaced) id goes, then the added
+/// states are appended in input order (SPEC.md §8). An edit that moves its entity to
+/// another cell is an error.
 pub(crate) fn apply_inputs<M: CellModel>(
+    grid: &Grid,
+    step: Step,
     mut states: Vec<M::State>,
     inputs: &[Input<M::State>],
-) -> Vec<M::State> {
+) -> Result<Vec<M::State>, ExecError> {
+    for i in inputs {
+        if let Input::Edit(id, edit) = i {
+            if let Some(s) = states.iter_mut().find(|s| M::id(s) == *id) {
+                let edited = edit.apply(s);
+                if grid.cell_of(M::position(&edited)) != grid.cell_of(M::position(s)) {
+                    return Err(InputError::EditLeftCell { step, id: *id }.into());
+                }
+                *s = edited;
+            }
+        }
+    }
     let removed: BTreeSet<BodyId> = inputs
         .iter()
         .filter_map(|i| match i {
             Input::Remove(id) => Some(*id),
             Input::Replace(s) => Some(M::id(s)),
-            Input::Spawn(_) => None,
+            Input::Spawn(_) | Input::Edit(..) => None,
         })
         .collect();
     if !removed.is_empty() {
@@ -222,5 +237,5 @@ pub(crate) fn apply_inputs<M: CellModel>(
             states.push(s.clone());
         }
     }
-    states
+    Ok(states)
 }

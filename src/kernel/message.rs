@@ -65,9 +65,45 @@ pub struct Message<S> {
     pub bodies: Bodies<S>,
     /// For an input: the ids of the bodies it removes (empty otherwise).
     pub removes: Vec<BodyId>,
+    /// For an input: the edits it applies, by entity id (empty otherwise).
+    pub edits: Vec<(BodyId, Edit<S>)>,
     /// Delta ghosts (SPEC.md §K4): the sender's state of the cell at `step` differs from its
     /// state at `step − 1`, so a ghost of `step + 1` follows. False for everything else.
     pub follows: bool,
+}
+
+/// A pure change of one entity's state — an impulse, a new velocity — applied at an input's
+/// step to whatever state the entity has then (SPEC.md §8, "Inputs on every executor"). It
+/// must keep the entity in its home cell (an edit that moves it is an error); it may be
+/// applied more than once to the same state (rollbacks), so it must be a function of the
+/// state alone.
+#[derive(Clone)]
+pub struct Edit<S>(Arc<dyn Fn(&S) -> S + Send + Sync>);
+
+impl<S> Edit<S> {
+    /// The edit `change` (a pure function of the state).
+    pub fn new(change: impl Fn(&S) -> S + Send + Sync + 'static) -> Self {
+        Edit(Arc::new(change))
+    }
+
+    /// The edited state.
+    pub fn apply(&self, state: &S) -> S {
+        (self.0)(state)
+    }
+}
+
+/// Two edits are equal when they are the same edit (one allocation), as copies of one input
+/// are.
+impl<S> PartialEq for Edit<S> {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl<S> std::fmt::Debug for Edit<S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Edit(..)")
+    }
 }
 
 /// An external event at a step, applied to the states at that step (before they are used).
@@ -77,9 +113,11 @@ pub enum Input<S> {
     Spawn(S),
     /// Removes the entity with this id, wherever it is.
     Remove(BodyId),
-    /// Replaces the state of the entity with the same id (e.g. to set its velocity or apply
-    /// an impulse); it is re-homed by its new position.
+    /// Replaces the state of the entity with the same id; it is re-homed by its new position.
     Replace(S),
+    /// Changes the state the entity with this id has at the step (e.g. applies an impulse or
+    /// sets its velocity from its current state); nothing if it is not there.
+    Edit(BodyId, Edit<S>),
 }
 
 impl<S> Message<S> {

@@ -21,9 +21,10 @@ impl<M: CellModel> World<M> {
             let src = msg.src_cell;
             match msg.kind {
                 MessageKind::Input => {
+                    let seq = msg.seq;
                     self.slots[i]
                         .inputs
-                        .insert(msg.seq, (msg.removes, msg.bodies));
+                        .insert(seq, super::log::InputEntry::of(msg));
                 }
                 MessageKind::Ghost => {
                     let slot = &mut self.slots[i];

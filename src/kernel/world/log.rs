@@ -4,7 +4,7 @@
 
 use super::World;
 use crate::frame::Event;
-use crate::kernel::message::{Bodies, MessageKind};
+use crate::kernel::message::{Bodies, Edit, MessageKind};
 use crate::kernel::partition::WorldId;
 use crate::model::{BodyId, CellModel, Step};
 use std::collections::{BTreeMap, BTreeSet};
@@ -134,8 +134,28 @@ pub(super) struct Slot<S, E> {
     pub(super) inputs: BTreeMap<u32, InputEntry<S>>,
 }
 
-/// An input applied to a slot: the ids it removes and the (home cell, state) it adds.
-pub(super) type InputEntry<S> = (Vec<BodyId>, Bodies<S>);
+/// An input applied to a slot: the entities it edits, the ids it removes and the (home cell,
+/// state) pairs it adds.
+#[derive(Debug)]
+pub(super) struct InputEntry<S> {
+    /// `(id, edit)`: applied first, to the state the entity has at the step.
+    pub(super) edits: Vec<(BodyId, Edit<S>)>,
+    /// Ids removed (or replaced) next.
+    pub(super) removes: Vec<BodyId>,
+    /// States added last, with their home cells.
+    pub(super) adds: Bodies<S>,
+}
+
+impl<S> InputEntry<S> {
+    /// The parts of input message `msg`.
+    pub(super) fn of(msg: crate::kernel::Message<S>) -> Self {
+        InputEntry {
+            edits: msg.edits,
+            removes: msg.removes,
+            adds: msg.bodies,
+        }
+    }
+}
 
 impl<S: Clone, E: Clone> Slot<S, E> {
     /// The state of own cell `x` (index in `World::cells`).
@@ -183,8 +203,8 @@ impl<S: Clone, E: Clone> Slot<S, E> {
                 .is_some_and(|h| Arc::ptr_eq(g, h));
             b += if shared { 0 } else { 16 + v + g.len() * s };
         }
-        for (removes, adds) in self.inputs.values() {
-            b += 8 + removes.len() * 8 + adds.len() * p;
+        for input in self.inputs.values() {
+            b += 8 + input.edits.len() * 16 + input.removes.len() * 8 + input.adds.len() * p;
         }
         b += self
             .foreign_in

@@ -217,14 +217,19 @@ impl<M: CellModel> World<M> {
             .collect();
         if step <= self.head {
             for (x, st) in self.slots[i].states.iter().enumerate() {
-                if view(st).iter().any(|b| msg.removes.contains(&M::id(b))) {
+                let touched = |b: &M::State| {
+                    let id = M::id(b);
+                    msg.removes.contains(&id) || msg.edits.iter().any(|e| e.0 == id)
+                };
+                if view(st).iter().any(touched) {
                     cells.insert(self.cells[x]);
                 }
             }
         }
+        let seq = msg.seq;
         self.slots[i]
             .inputs
-            .insert(msg.seq, (msg.removes, msg.bodies));
+            .insert(seq, super::log::InputEntry::of(msg));
         let mut dirtied = false;
         if step <= self.head {
             for d in cells {

@@ -183,14 +183,28 @@ impl<M: CellModel> World<M> {
             v.extend(bs.iter().cloned());
         }
         if !cur.inputs.is_empty() {
+            for (id, edit) in cur.inputs.values().flat_map(|i| i.edits.iter()) {
+                if let Some(b) = v.iter_mut().find(|b| M::id(b) == *id) {
+                    let edited = edit.apply(b);
+                    let home = grid
+                        .cell_of(M::position(&edited))
+                        .map(|c| grid.index(c) as u32);
+                    assert!(
+                        home == Some(d),
+                        "an input at step {t} edits entity {id} out of its home cell: an edit \
+                         must keep the entity in its cell (replace the state to move it)"
+                    );
+                    *b = edited;
+                }
+            }
             let removed: BTreeSet<BodyId> = cur
                 .inputs
                 .values()
-                .flat_map(|i| i.0.iter().copied())
+                .flat_map(|i| i.removes.iter().copied())
                 .collect();
             v.retain(|b| !removed.contains(&M::id(b)));
-            for (_, adds) in cur.inputs.values() {
-                v.extend(adds.iter().filter(|p| p.0 == d).map(|p| p.1.clone()));
+            for input in cur.inputs.values() {
+                v.extend(input.adds.iter().filter(|p| p.0 == d).map(|p| p.1.clone()));
             }
         }
         v.sort_by_key(|b| M::id(b));
@@ -374,7 +388,7 @@ impl<M: CellModel> World<M> {
             .chain(
                 next.inputs
                     .values()
-                    .flat_map(|x| x.1.iter().map(|p| p.0))
+                    .flat_map(|x| x.adds.iter().map(|p| p.0))
                     .filter(|&c| part.owner(c) == id),
             )
             .collect();

@@ -45,6 +45,7 @@ impl<M: CellModel> World<M> {
         let me = self.id;
         let bug = self.bug;
         let msg = |sign, seq, bodies| Message {
+            edits: Vec::new(),
             step,
             kind,
             sign,
