@@ -131,6 +131,10 @@ pub struct RunDescription {
     /// Events of the steps up to the checkpoint's, including bodies outside the domain at
     /// step 0.
     pub events: EventTotals,
+    /// The run's input script, whole (`--inputs`; a resume applies the entries after the
+    /// checkpoint's step).
+    #[serde(default)]
+    pub inputs: soda::scene::InputScript,
 }
 
 /// Writes checkpoints of one run at committed steps.

@@ -90,6 +90,8 @@ pub fn resume(args: &ResumeArgs, matches: &ArgMatches) -> Result<()> {
         origin,
         source: run.scene,
         scene_file: None,
+        script: run.inputs,
+        script_origin: ("the checkpoint's input script".to_string(), None),
         options,
         from: Some(ResumeFrom {
             step: checkpoint.step,

@@ -14,6 +14,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::app::atomic::{self, AtomicFile};
 use soda::frame::StatesWanted;
+use soda::scene::{parse_inputs, InputScript};
 use soda::sim::{run_scene_from, ExecutorKind, ResumeFrom, RunOptions, RunReport};
 use soda::{Body, Frame, RigidBodyModel, Scene};
 use std::io::IsTerminal;
@@ -54,6 +55,12 @@ pub struct RunArgs {
     #[arg(long, value_name = "N", default_value_t = 600, help_heading = "Run",
           value_parser = super::numbers::whole(0, u64::MAX))]
     pub steps: u64,
+
+    /// Apply the scripted inputs of FILE (.toml or .json): at given steps spawn a body,
+    /// remove one, push one or set its velocity (docs/formats.md, "Input scripts"). Every
+    /// executor applies them with the same bits.
+    #[arg(long, value_name = "FILE", help_heading = "Run")]
+    pub inputs: Option<PathBuf>,
 
     #[command(flatten)]
     pub executor: ExecutorArgs,
@@ -126,13 +133,16 @@ impl Outputs {
     /// other and the scene file, and opens what can be opened; nothing is computed yet.
     fn plan(
         out: &OutputArgs,
-        scene_file: Option<&Path>,
+        [scene_file, script_file]: [Option<&Path>; 2],
         checkpoint: Option<&Path>,
         last_step: u64,
     ) -> Result<(Outputs, Option<PathBuf>)> {
         let mut plan = OutputPlan::new();
         if let Some(scene) = scene_file {
             plan.input("the scene file", scene);
+        }
+        if let Some(script) = script_file {
+            plan.input("the input script", script);
         }
         let checkpoint = match checkpoint {
             Some(path) => Some(plan.file("--checkpoint", path)?),
@@ -186,6 +196,10 @@ pub(super) struct Job<'a> {
     pub source: SceneSource,
     /// The scene file to protect from being overwritten, if the scene is a file.
     pub scene_file: Option<PathBuf>,
+    /// The scripted inputs (all of them, also those before `from`'s step).
+    pub script: InputScript,
+    /// Where the script came from, for messages, and the file to protect, if any.
+    pub script_origin: (String, Option<PathBuf>),
     /// Executor and kernel options.
     pub options: RunOptions,
     /// The committed bodies to start from (a resume), or `None` for the scene's bodies.
@@ -206,11 +220,22 @@ pub(super) struct Job<'a> {
 pub fn run(args: &RunArgs) -> Result<()> {
     let options = args.executor.options()?;
     let (scene, origin, source) = args.scene.load_with_source()?;
+    let script = match &args.inputs {
+        Some(path) => read_script(path)?,
+        None => InputScript::default(),
+    };
     execute(Job {
         scene,
         origin,
         source,
         scene_file: args.scene.file().map(Path::to_path_buf),
+        script,
+        script_origin: (
+            args.inputs
+                .as_ref()
+                .map_or(String::new(), |p| p.display().to_string()),
+            args.inputs.clone(),
+        ),
         options,
         from: None,
         events_before: EventTotals::default(),
@@ -225,6 +250,20 @@ pub fn run(args: &RunArgs) -> Result<()> {
     })
 }
 
+/// Reads and parses an input script (validated against the scene by `execute`).
+fn read_script(path: &Path) -> Result<InputScript> {
+    let Some(format) = soda::scene::SceneFormat::from_path(path) else {
+        bail!(
+            "--inputs `{}`: an input script's name must end in .toml or .json",
+            path.display()
+        );
+    };
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the input script `{}`", path.display()))?;
+    parse_inputs(&text, format, &path.display().to_string())
+        .with_context(|| format!("cannot load the input script `{}`", path.display()))
+}
+
 /// Runs a job: checks every output, runs, writes the outputs and prints the summary.
 pub(super) fn execute(job: Job<'_>) -> Result<()> {
     let Job {
@@ -232,6 +271,8 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         origin,
         source,
         scene_file,
+        script,
+        script_origin,
         mut options,
         from,
         mut events_before,
@@ -263,6 +304,14 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         );
     }
     let steps = last_step - first_step;
+    // Every entry is checked against the scene (from step 1: a resumed run's script is the
+    // whole run's); those a checkpoint already holds the effect of are dropped.
+    let inputs: Vec<_> = script
+        .to_inputs(&scene, &script_origin.0, 1)
+        .with_context(|| format!("cannot use the input script `{}`", script_origin.0))?
+        .into_iter()
+        .filter(|(step, _)| *step > first_step)
+        .collect();
     let grid = scene.grid();
     // The bodies at the first step: the scene's inside the grid, or the checkpoint's.
     let mut initial: Vec<Body> = match &from {
@@ -293,7 +342,7 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
     }
     let (outputs, checkpoint_path) = Outputs::plan(
         output,
-        scene_file.as_deref(),
+        [scene_file.as_deref(), script_origin.1.as_deref()],
         checkpoint.as_ref().map(|c| c.0.as_path()),
         last_step,
     )?;
@@ -320,6 +369,7 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
                 last_step,
                 checkpoint_every: *every,
                 events: events_before,
+                inputs: script.clone(),
             },
         )),
         _ => None,
@@ -352,7 +402,7 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         from,
         steps,
         &wanted,
-        Vec::new(),
+        inputs,
         |frame, states, _control| {
             if let (Some(r), Some(states)) = (record.as_mut(), states) {
                 r.frame(frame.step, states);

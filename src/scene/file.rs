@@ -78,7 +78,7 @@ pub fn parse_scene(text: &str, format: SceneFormat, origin: &str) -> Result<Scen
 }
 
 /// The TOML parser's message, with the line and column when it has a location.
-fn toml_message(e: &toml::de::Error, text: &str) -> String {
+pub(crate) fn toml_message(e: &toml::de::Error, text: &str) -> String {
     let message = e.message().trim_end();
     let Some(span) = e.span() else {
         return message.to_string();
@@ -105,7 +105,7 @@ fn toml_message(e: &toml::de::Error, text: &str) -> String {
 
 /// The JSON parser's message, which already ends with the line and column; a syntax error
 /// on a line holding `NaN` or `Infinity` (not JSON, which has finite numbers only) says so.
-fn json_message(e: &serde_json::Error, text: &str) -> String {
+pub(crate) fn json_message(e: &serde_json::Error, text: &str) -> String {
     let kind = match e.classify() {
         serde_json::error::Category::Syntax => "syntax error: ",
         serde_json::error::Category::Eof => "unexpected end of file: ",

@@ -5,11 +5,13 @@ mod builder;
 pub mod builtin;
 mod error;
 mod file;
+pub mod inputs;
 mod validate;
 
 pub use builder::SceneBuilder;
 pub use error::SceneError;
 pub use file::{load_scene_file, parse_scene, SceneFormat};
+pub use inputs::{parse_inputs, InputAction, InputScript, ScriptedInput};
 
 use crate::grid::Grid;
 use crate::math::{Quat, Vec3};
@@ -143,6 +145,22 @@ fn euler(r: [f32; 3]) -> Quat {
     Quat::from_euler_angles(r[0], r[1], r[2])
 }
 
+impl BodySpec {
+    /// The body this spec describes, with its velocities.
+    pub fn to_body(&self) -> Body {
+        let mut b = Body::new(
+            self.id,
+            self.shape,
+            self.material,
+            self.position.into(),
+            euler(self.rotation),
+        );
+        b.linvel = self.velocity.into();
+        b.angvel = self.angular_velocity.into();
+        b
+    }
+}
+
 impl Scene {
     /// The cell model of this scene.
     pub fn model(&self) -> RigidBodyModel {
@@ -227,22 +245,7 @@ impl Scene {
 
     /// The bodies' initial states, sorted by id.
     pub fn initial_bodies(&self) -> Vec<Body> {
-        let mut v: Vec<Body> = self
-            .bodies
-            .iter()
-            .map(|s| {
-                let mut b = Body::new(
-                    s.id,
-                    s.shape,
-                    s.material,
-                    s.position.into(),
-                    euler(s.rotation),
-                );
-                b.linvel = s.velocity.into();
-                b.angvel = s.angular_velocity.into();
-                b
-            })
-            .collect();
+        let mut v: Vec<Body> = self.bodies.iter().map(BodySpec::to_body).collect();
         v.sort_by_key(|b| b.id);
         v
     }

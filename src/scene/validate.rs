@@ -1,6 +1,6 @@
 //! Scene validation: every rule names the field, the value and what is allowed.
 
-use super::{Scene, SceneError};
+use super::{BodySpec, Scene, SceneError};
 use crate::grid::Grid;
 use crate::physics::metrics::{environment_penetration, pair_penetration};
 use crate::physics::{RigidBodyModel, Shape};
@@ -190,90 +190,7 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
     let mut ids: Vec<(u64, usize)> = Vec::with_capacity(scene.bodies.len());
     for (i, b) in scene.bodies.iter().enumerate() {
         let f = |name: &str| format!("bodies[{i}].{name}");
-        match b.shape {
-            Shape::Ball { radius } => c.positive(&f("shape.radius"), radius)?,
-            Shape::Cuboid { half_extents } => {
-                for (k, &h) in half_extents.iter().enumerate() {
-                    c.positive(&f(&format!("shape.half_extents[{k}]")), h)?;
-                }
-            }
-        }
-        let diameter = 2.0 * b.shape.bounding_radius();
-        if diameter >= smallest {
-            return Err(c.fail(
-                f("shape"),
-                b.shape,
-                &format!("the body (bounding diameter {diameter} m) must be smaller than the domain's smallest extent ({smallest} m)"),
-            ));
-        }
-        c.positive(&f("material.density"), b.material.density)?;
-        // Mass and inertia derived in f32 must be finite and non-zero: a radius of 1e-38 m
-        // passes the checks above but its inertia underflows, and the solver would turn the
-        // infinite inverse into NaN (a hard error at the first step, SPEC.md §5.3).
-        let probe = crate::physics::Body::new(
-            b.id,
-            b.shape,
-            b.material,
-            nalgebra::Vector3::zeros(),
-            nalgebra::UnitQuaternion::identity(),
-        );
-        let inverse = [
-            probe.inv_mass,
-            probe.inv_inertia.x,
-            probe.inv_inertia.y,
-            probe.inv_inertia.z,
-        ];
-        if !inverse.iter().all(|v| v.is_finite() && *v > 0.0) {
-            return Err(c.fail(
-                f("shape"),
-                b.shape,
-                &format!(
-                    "the mass ({} kg) and moments of inertia derived from the size and density must be finite and non-zero in f32 (the body is too small or too large)",
-                    b.material.density * b.shape.volume()
-                ),
-            ));
-        }
-        c.range(
-            &f("material.friction"),
-            b.material.friction,
-            0.0,
-            10.0,
-            "must be between 0 and 10",
-        )?;
-        c.range(
-            &f("material.restitution"),
-            b.material.restitution,
-            0.0,
-            1.0,
-            "must be between 0 and 1",
-        )?;
-        c.finite(&f("position"), &b.position)?;
-        c.finite(&f("rotation"), &b.rotation)?;
-        c.finite(&f("velocity"), &b.velocity)?;
-        c.finite(&f("angular_velocity"), &b.angular_velocity)?;
-        for k in 0..3 {
-            if b.position[k] < scene.domain.min[k] || b.position[k] >= scene.domain.max[k] {
-                return Err(c.fail(
-                    f("position"),
-                    b.position,
-                    &format!(
-                        "the centre must lie inside the domain: domain.min = {:?} <= position < domain.max = {:?} on every axis",
-                        scene.domain.min, scene.domain.max
-                    ),
-                ));
-            }
-        }
-        let speed = nalgebra::Vector3::from(b.velocity).norm();
-        if speed > s.max_speed {
-            return Err(c.fail(
-                f("velocity"),
-                b.velocity,
-                &format!(
-                    "speed must not exceed solver.max_speed = {} m/s",
-                    s.max_speed
-                ),
-            ));
-        }
+        check_body(&c, scene, b, &f, smallest)?;
         ids.push((b.id, i));
     }
     ids.sort();
@@ -341,6 +258,130 @@ fn check_overlaps(scene: &Scene, grid: &Grid, c: &Checker) -> Result<(), SceneEr
                 }
             }
         }
+    }
+    Ok(())
+}
+
+/// The rules of one body of `scene` (shape, material, mass, position inside the domain,
+/// speed); `f` names a field of it in messages, `smallest` is the domain's smallest extent.
+fn check_body(
+    c: &Checker,
+    scene: &Scene,
+    b: &BodySpec,
+    f: &dyn Fn(&str) -> String,
+    smallest: f32,
+) -> Result<(), SceneError> {
+    let s = &scene.solver;
+    match b.shape {
+        Shape::Ball { radius } => c.positive(&f("shape.radius"), radius)?,
+        Shape::Cuboid { half_extents } => {
+            for (k, &h) in half_extents.iter().enumerate() {
+                c.positive(&f(&format!("shape.half_extents[{k}]")), h)?;
+            }
+        }
+    }
+    let diameter = 2.0 * b.shape.bounding_radius();
+    if diameter >= smallest {
+        return Err(c.fail(
+            f("shape"),
+            b.shape,
+            &format!("the body (bounding diameter {diameter} m) must be smaller than the domain's smallest extent ({smallest} m)"),
+        ));
+    }
+    c.positive(&f("material.density"), b.material.density)?;
+    // Mass and inertia derived in f32 must be finite and non-zero: a radius of 1e-38 m
+    // passes the checks above but its inertia underflows, and the solver would turn the
+    // infinite inverse into NaN (a hard error at the first step, SPEC.md §5.3).
+    let probe = crate::physics::Body::new(
+        b.id,
+        b.shape,
+        b.material,
+        nalgebra::Vector3::zeros(),
+        nalgebra::UnitQuaternion::identity(),
+    );
+    let inverse = [
+        probe.inv_mass,
+        probe.inv_inertia.x,
+        probe.inv_inertia.y,
+        probe.inv_inertia.z,
+    ];
+    if !inverse.iter().all(|v| v.is_finite() && *v > 0.0) {
+        return Err(c.fail(
+            f("shape"),
+            b.shape,
+            &format!(
+                "the mass ({} kg) and moments of inertia derived from the size and density must be finite and non-zero in f32 (the body is too small or too large)",
+                b.material.density * b.shape.volume()
+            ),
+        ));
+    }
+    c.range(
+        &f("material.friction"),
+        b.material.friction,
+        0.0,
+        10.0,
+        "must be between 0 and 10",
+    )?;
+    c.range(
+        &f("material.restitution"),
+        b.material.restitution,
+        0.0,
+        1.0,
+        "must be between 0 and 1",
+    )?;
+    c.finite(&f("position"), &b.position)?;
+    c.finite(&f("rotation"), &b.rotation)?;
+    c.finite(&f("velocity"), &b.velocity)?;
+    c.finite(&f("angular_velocity"), &b.angular_velocity)?;
+    for k in 0..3 {
+        if b.position[k] < scene.domain.min[k] || b.position[k] >= scene.domain.max[k] {
+            return Err(c.fail(
+                f("position"),
+                b.position,
+                &format!(
+                    "the centre must lie inside the domain: domain.min = {:?} <= position < domain.max = {:?} on every axis",
+                    scene.domain.min, scene.domain.max
+                ),
+            ));
+        }
+    }
+    let speed = nalgebra::Vector3::from(b.velocity).norm();
+    if speed > s.max_speed {
+        return Err(c.fail(
+            f("velocity"),
+            b.velocity,
+            &format!(
+                "speed must not exceed solver.max_speed = {} m/s",
+                s.max_speed
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks a body added to `scene` during a run (an input): the rules of a scene's body, an
+/// id not in `in_use`, and no bigger than the scene's largest body (the grid's cell edge was
+/// sized for that one, SPEC.md §3). `field` names the body in messages (`inputs[3].body`).
+pub fn validate_added_body(
+    scene: &Scene,
+    b: &BodySpec,
+    origin: &str,
+    field: &str,
+) -> Result<(), SceneError> {
+    let c = Checker { origin };
+    let extent = [0, 1, 2].map(|k| scene.domain.max[k] - scene.domain.min[k]);
+    let smallest = extent.iter().cloned().fold(f32::INFINITY, f32::min);
+    let f = |name: &str| format!("{field}.{name}");
+    check_body(&c, scene, b, &f, smallest)?;
+    let largest = scene.max_radius();
+    if b.shape.bounding_radius() > largest {
+        return Err(c.fail(
+            f("shape"),
+            b.shape,
+            &format!(
+                "an added body must be no bigger than the scene's largest (bounding radius {largest} m): the grid's cells were sized for that one; add a body that big to the scene, or set the scene's cell_edge"
+            ),
+        ));
     }
     Ok(())
 }

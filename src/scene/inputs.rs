@@ -1,0 +1,325 @@
+//! Input scripts (`soda run --inputs FILE`): what happens to a scene's bodies at given
+//! steps — spawn a body, remove one, push one, set its velocity — validated like scene files
+//! (every error names the entry, the field, the value and what is allowed), and turned into
+//! kernel inputs that every executor applies with the same bits (SPEC.md §8, §7).
+
+use super::file::{json_message, toml_message};
+use super::validate::validate_added_body;
+use super::{BodySpec, Scene, SceneError, SceneFormat};
+use crate::kernel::{Edit, Input};
+use crate::math::Vec3;
+use crate::model::{BodyId, Step};
+use crate::physics::Body;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// What an input does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum InputAction {
+    /// Adds `body` (a body as in scene files, with an id not in use).
+    Spawn,
+    /// Removes the body `id`.
+    Remove,
+    /// Adds `impulse` (N·s) to the body `id`'s momentum at its centre of mass, and
+    /// `angular_impulse` (N·m·s, world frame) to its angular momentum; wakes it.
+    Push,
+    /// Sets the body `id`'s `velocity` (m/s) and, if given, `angular_velocity` (rad/s);
+    /// wakes it.
+    SetVelocity,
+}
+
+impl InputAction {
+    fn name(self) -> &'static str {
+        match self {
+            InputAction::Spawn => "spawn",
+            InputAction::Remove => "remove",
+            InputAction::Push => "push",
+            InputAction::SetVelocity => "set-velocity",
+        }
+    }
+}
+
+/// One scripted input: at `step`, `action`, with the fields that action takes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScriptedInput {
+    /// The step the input applies to (the state of that step, before it is used).
+    pub step: Step,
+    /// What it does.
+    pub action: InputAction,
+    /// The body concerned (`remove`, `push`, `set-velocity`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<BodyId>,
+    /// The body added (`spawn`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub body: Option<BodySpec>,
+    /// Linear impulse, N·s (`push`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub impulse: Option<[f32; 3]>,
+    /// Angular impulse about the centre of mass, N·m·s (`push`, optional).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angular_impulse: Option<[f32; 3]>,
+    /// New linear velocity, m/s (`set-velocity`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub velocity: Option<[f32; 3]>,
+    /// New angular velocity, rad/s (`set-velocity`, optional: unchanged if absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angular_velocity: Option<[f32; 3]>,
+}
+
+/// An input script: `[[inputs]]` entries, in any order (applied by step, then in file order).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InputScript {
+    /// The entries.
+    #[serde(default)]
+    pub inputs: Vec<ScriptedInput>,
+}
+
+/// Parses an input script (TOML or JSON); `origin` names it in messages. Validate it against
+/// its scene with [`InputScript::to_inputs`].
+pub fn parse_inputs(
+    text: &str,
+    format: SceneFormat,
+    origin: &str,
+) -> Result<InputScript, SceneError> {
+    match format {
+        SceneFormat::Toml => toml::from_str(text).map_err(|e| SceneError::Parse {
+            origin: origin.to_string(),
+            message: toml_message(&e, text),
+        }),
+        SceneFormat::Json => serde_json::from_str(text).map_err(|e| SceneError::Parse {
+            origin: origin.to_string(),
+            message: json_message(&e, text),
+        }),
+    }
+}
+
+/// The presence of ids along the script, in application order.
+struct Presence {
+    /// Id → where it came from (`None`: the scene), and the entry that removed it.
+    ids: BTreeMap<BodyId, (Option<usize>, Option<usize>)>,
+}
+
+impl InputScript {
+    /// Validates every entry against `scene` and turns the script into kernel inputs, in the
+    /// order they apply (by step, then file order). `first_step` is the earliest step an
+    /// input may name (1, or the step after a checkpoint's).
+    pub fn to_inputs(
+        &self,
+        scene: &Scene,
+        origin: &str,
+        first_step: Step,
+    ) -> Result<Vec<(Step, Input<Body>)>, SceneError> {
+        let fail = |i: usize, field: &str, value: String, allowed: String| SceneError::Invalid {
+            origin: origin.to_string(),
+            field: format!("inputs[{i}].{field}"),
+            value,
+            allowed,
+        };
+        let mut order: Vec<usize> = (0..self.inputs.len()).collect();
+        order.sort_by_key(|&i| self.inputs[i].step);
+        let mut presence = Presence {
+            ids: scene.bodies.iter().map(|b| (b.id, (None, None))).collect(),
+        };
+        let mut out = Vec::with_capacity(order.len());
+        for i in order {
+            let e = &self.inputs[i];
+            if e.step < first_step.max(1) {
+                return Err(fail(
+                    i,
+                    "step",
+                    e.step.to_string(),
+                    if first_step <= 1 {
+                        "must be 1 or more: step 0 is the initial state (put the change in the scene)".into()
+                    } else {
+                        format!("must be {first_step} or more: the steps before are committed")
+                    },
+                ));
+            }
+            let allowed_fields: &[&str] = match e.action {
+                InputAction::Spawn => &["body"],
+                InputAction::Remove => &["id"],
+                InputAction::Push => &["id", "impulse", "angular_impulse"],
+                InputAction::SetVelocity => &["id", "velocity", "angular_velocity"],
+            };
+            let given = [
+                ("id", e.id.is_some()),
+                ("body", e.body.is_some()),
+                ("impulse", e.impulse.is_some()),
+                ("angular_impulse", e.angular_impulse.is_some()),
+                ("velocity", e.velocity.is_some()),
+                ("angular_velocity", e.angular_velocity.is_some()),
+            ];
+            if let Some((field, _)) = given
+                .iter()
+                .find(|(f, g)| *g && !allowed_fields.contains(f))
+            {
+                return Err(fail(
+                    i,
+                    field,
+                    "given".into(),
+                    format!(
+                        "a `{}` input takes {}",
+                        e.action.name(),
+                        allowed_fields.join(", ")
+                    ),
+                ));
+            }
+            let required = |field: &str, present: bool| {
+                if present {
+                    Ok(())
+                } else {
+                    Err(fail(
+                        i,
+                        field,
+                        "missing".into(),
+                        format!("a `{}` input needs `{field}`", e.action.name()),
+                    ))
+                }
+            };
+            let finite = |field: &str, v: [f32; 3]| {
+                if v.iter().all(|x| x.is_finite()) {
+                    Ok(())
+                } else {
+                    Err(fail(
+                        i,
+                        field,
+                        format!("{v:?}"),
+                        "every component must be a finite number".into(),
+                    ))
+                }
+            };
+            let input = match e.action {
+                InputAction::Spawn => {
+                    required("body", e.body.is_some())?;
+                    let body = e.body.as_ref().expect("checked");
+                    validate_added_body(scene, body, origin, &format!("inputs[{i}].body"))?;
+                    if let Some((from, None)) = presence.ids.get(&body.id) {
+                        return Err(fail(
+                            i,
+                            "body.id",
+                            body.id.to_string(),
+                            format!(
+                                "must not be in use: {} has that id",
+                                from.map_or("a body of the scene".to_string(), |j| format!(
+                                    "the body inputs[{j}] spawns"
+                                ))
+                            ),
+                        ));
+                    }
+                    presence.ids.insert(body.id, (Some(i), None));
+                    Input::Spawn(body.to_body())
+                }
+                InputAction::Remove | InputAction::Push | InputAction::SetVelocity => {
+                    required("id", e.id.is_some())?;
+                    let id = e.id.expect("checked");
+                    match presence.ids.get(&id) {
+                        None => {
+                            return Err(fail(
+                                i,
+                                "id",
+                                id.to_string(),
+                                "must be the id of a body of the scene or of one an earlier input spawns".into(),
+                            ))
+                        }
+                        Some((_, Some(j))) => {
+                            return Err(fail(
+                                i,
+                                "id",
+                                id.to_string(),
+                                format!("the body is gone by then: inputs[{j}] removes it"),
+                            ))
+                        }
+                        Some((Some(j), None))
+                            if self.inputs[*j].step == e.step
+                                && e.action != InputAction::Remove =>
+                        {
+                            return Err(fail(
+                                i,
+                                "step",
+                                e.step.to_string(),
+                                format!(
+                                    "inputs[{j}] spawns the body at the same step, and changes apply before additions: name a later step"
+                                ),
+                            ))
+                        }
+                        Some(_) => {}
+                    }
+                    match e.action {
+                        InputAction::Remove => {
+                            if let Some(p) = presence.ids.get_mut(&id) {
+                                p.1 = Some(i);
+                            }
+                            Input::Remove(id)
+                        }
+                        InputAction::Push => {
+                            required("impulse", e.impulse.is_some())?;
+                            let impulse = e.impulse.expect("checked");
+                            finite("impulse", impulse)?;
+                            let angular = e.angular_impulse.unwrap_or([0.0; 3]);
+                            finite("angular_impulse", angular)?;
+                            Input::Edit(id, push(impulse.into(), angular.into()))
+                        }
+                        _ => {
+                            required("velocity", e.velocity.is_some())?;
+                            let velocity = e.velocity.expect("checked");
+                            finite("velocity", velocity)?;
+                            let speed = Vec3::from(velocity).norm();
+                            if speed > scene.solver.max_speed {
+                                return Err(fail(
+                                    i,
+                                    "velocity",
+                                    format!("{velocity:?}"),
+                                    format!(
+                                        "speed must not exceed solver.max_speed = {} m/s",
+                                        scene.solver.max_speed
+                                    ),
+                                ));
+                            }
+                            if let Some(w) = e.angular_velocity {
+                                finite("angular_velocity", w)?;
+                            }
+                            Input::Edit(
+                                id,
+                                set_velocity(velocity.into(), e.angular_velocity.map(Vec3::from)),
+                            )
+                        }
+                    }
+                }
+            };
+            out.push((e.step, input));
+        }
+        Ok(out)
+    }
+}
+
+/// An edit adding `impulse` at the centre of mass and `angular` about it (world frame); the
+/// body wakes (SPEC.md §5.4).
+pub fn push(impulse: Vec3, angular: Vec3) -> Edit<Body> {
+    Edit::new(move |b: &Body| {
+        let mut b = b.clone();
+        b.linvel += impulse * b.inv_mass;
+        // I⁻¹ L in the world frame: the body-frame inverse inertia, rotated.
+        let local = b.rotation.inverse_transform_vector(&angular);
+        b.angvel += b
+            .rotation
+            .transform_vector(&local.component_mul(&b.inv_inertia));
+        b.rest_steps = 0;
+        b
+    })
+}
+
+/// An edit setting the velocity (and the angular velocity, if given); the body wakes.
+pub fn set_velocity(velocity: Vec3, angular: Option<Vec3>) -> Edit<Body> {
+    Edit::new(move |b: &Body| {
+        let mut b = b.clone();
+        b.linvel = velocity;
+        if let Some(w) = angular {
+            b.angvel = w;
+        }
+        b.rest_steps = 0;
+        b
+    })
+}
