@@ -299,3 +299,55 @@ fn registered_models_resume_from_their_checkpoints_to_the_uninterrupted_hash() {
         }
     }
 }
+
+/// Ctrl-C (SIGINT) stops a registered model's run at a committed step with status 130,
+/// names the checkpoint to resume from, leaves no temporary file, and the resumed run ends
+/// with the uninterrupted hash.
+#[test]
+fn interrupted_model_run_says_where_it_stopped_and_resumes_to_the_same_hash() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("epi.ckpt");
+    let base = ["run", "--model", "epidemic", "--entities", "3000"];
+    let whole = hash_of(&ok(&[&base[..], &["--steps", "400"]].concat()));
+    let child = Command::new(env!("CARGO_BIN_EXE_soda"))
+        .args(base)
+        .args([
+            "--steps",
+            "400",
+            "--checkpoint",
+            s(&file),
+            "--checkpoint-every",
+            "10",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait for the first checkpoint, then interrupt.
+    let started = Instant::now();
+    while !file.exists() && started.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // SAFETY: sends SIGINT to the child we spawned and still own (not yet waited for).
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+    }
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    if out.status.code() == Some(0) {
+        // The run finished before the signal arrived: nothing to resume.
+        assert_eq!(hash_of(&String::from_utf8_lossy(&out.stdout)), whole);
+        return;
+    }
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted at step"), "{err}");
+    assert!(err.contains("continues from step"), "{err}");
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+    let resumed = ok(&["resume", s(&file)]);
+    assert_eq!(hash_of(&resumed), whole);
+}

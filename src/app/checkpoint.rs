@@ -97,6 +97,9 @@ pub fn resume(
         every: run.checkpoint_every,
     };
     let last_step = steps.unwrap_or(run.last_step);
+    if let Err(e) = super::interrupt::install() {
+        eprintln!("warning: Ctrl-C will not stop the run cleanly: {e}");
+    }
     let (report, written) = model
         .run_from(
             &run.size,
@@ -106,6 +109,7 @@ pub fn resume(
             Some(&plan),
         )
         .with_context(|| format!("cannot resume from {}", file.display()))?;
+    super::commands::interrupted(&report, Some(file), written);
     super::commands::print_report(model, &report, json)?;
     if !json {
         println!(

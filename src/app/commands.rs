@@ -28,7 +28,11 @@ pub fn run(
     }
     let mut options = options.clone();
     options.kernel.trace = trace.is_some();
+    if let Err(e) = super::interrupt::install() {
+        eprintln!("warning: Ctrl-C will not stop the run cleanly: {e}");
+    }
     let (report, written) = model.run_from(size, &options, None, steps, checkpoint)?;
+    interrupted(&report, checkpoint.map(|c| c.path.as_path()), written);
     if let (Some(path), Some(t)) = (trace, &report.trace) {
         super::atomic::write(path, serde_json::to_string(t)?.as_bytes())?;
         eprintln!(
@@ -41,6 +45,32 @@ pub fn run(
         println!("checkpoint       {} at step {step}", plan.path.display());
     }
     Ok(report)
+}
+
+/// A run stopped by Ctrl-C or SIGTERM (`report.stopped_at`): discards the temporary output
+/// files, prints where it stopped, the hash there and the checkpoint to resume from, and
+/// exits with 130 (143 for SIGTERM). Returns if the run was not interrupted.
+pub fn interrupted(
+    report: &ModelReport,
+    checkpoint: Option<&Path>,
+    written: Option<crate::model::Step>,
+) {
+    let Some(step) = report.stopped_at else {
+        return;
+    };
+    super::atomic::discard_all();
+    let resume = match (checkpoint, written) {
+        (Some(path), Some(at)) => {
+            format!("; `resume {}` continues from step {at}", path.display())
+        }
+        (Some(_), None) => "; no checkpoint was written yet".to_string(),
+        _ => String::new(),
+    };
+    eprintln!(
+        "interrupted at step {step}, hash {}{resume}; no other output written",
+        report.hash
+    );
+    std::process::exit(i32::from(super::interrupt::exit_status()));
 }
 
 /// Prints a run's report: JSON, or the summary ending with the `hash` line.

@@ -22,6 +22,7 @@ pub mod atomic;
 pub mod charts;
 pub mod checkpoint;
 pub mod commands;
+pub mod interrupt;
 mod main;
 mod registry;
 

@@ -174,7 +174,10 @@ where
             .options(options.clone())
             .start_at(origin)
             .states(wanted)
-            .run(last_step - origin, |frame, states, _| {
+            .run(last_step - origin, |frame, states, control| {
+                if super::interrupt::requested() {
+                    control.stop();
+                }
                 let (Some(plan), Some(codec), Some(states)) = (checkpoints, codec, states) else {
                     return;
                 };

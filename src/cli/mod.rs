@@ -6,7 +6,6 @@
 mod checkpoint;
 mod exec_args;
 mod experiment;
-mod interrupt;
 mod numbers;
 mod output;
 mod plan;

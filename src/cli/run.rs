@@ -4,7 +4,6 @@ use super::checkpoint::{
     CheckpointArgs, CheckpointWriter, EventTotals, RunDescription, SceneSource,
 };
 use super::exec_args::ExecutorArgs;
-use super::interrupt;
 use super::output::print;
 use super::plan::OutputPlan;
 use super::record::Recorder;
@@ -13,6 +12,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::app::atomic::{self, AtomicFile};
+use soda::app::interrupt;
 use soda::frame::StatesWanted;
 use soda::scene::{parse_inputs, InputScript};
 use soda::sim::{run_scene_from, ExecutorKind, ResumeFrom, RunOptions, RunReport};

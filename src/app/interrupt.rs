@@ -1,9 +1,10 @@
-//! Ctrl-C (SIGINT) and SIGTERM during `soda run`: the first one asks the run to stop at its
-//! next committed frame (the frame sink polls [`requested`]), a second one gives up at once.
+//! Ctrl-C (SIGINT) and SIGTERM during a run (`soda run`, `run --model NAME`): the first one
+//! asks the run to stop at its next committed frame (the frame sink polls [`requested`]), a
+//! second one gives up at once.
 //!
 //! The signal handler only stores a flag and writes one byte to a pipe (both async-signal
 //! safe). A watcher thread reads the pipe: on the second signal it removes every uncommitted
-//! temporary output file ([`soda::app::atomic::discard_all`]) and exits with 128 + the signal
+//! temporary output file ([`super::atomic::discard_all`]) and exits with 128 + the signal
 //! number, for a run stuck in a long step.
 
 use std::sync::atomic::{AtomicBool, AtomicI32, AtomicUsize, Ordering};
@@ -86,7 +87,7 @@ fn watch(read_end: libc::c_int) {
             return;
         }
         if COUNT.load(Ordering::SeqCst) >= 2 {
-            soda::app::atomic::discard_all();
+            super::atomic::discard_all();
             eprintln!("interrupted again: stopped at once, no output file written");
             std::process::exit(i32::from(exit_status()));
         }
