@@ -17,6 +17,7 @@ mod scenes;
 mod source;
 mod table;
 mod verify;
+mod view;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use std::process::ExitCode;
@@ -72,6 +73,13 @@ enum Command {
     /// For the other models: `soda experiment granularity --model NAME [--windows 4,16,64]`.
     #[command(after_help = experiment::AFTER_HELP)]
     Experiment(experiment::ExperimentArgs),
+    /// Watch a run live in the browser and act on it: the bodies in 3D tinted by the world
+    /// that owns them, GVT and each world's LVT, rollbacks as flashes; click to push a body,
+    /// shift-click to drop a cube; "save run" writes a scene and input log that replay it.
+    ///
+    /// Serves http://127.0.0.1:7878/ (loopback only) on the threaded executor by default.
+    #[command(after_help = view::AFTER_HELP, allow_negative_numbers = true)]
+    View(Box<view::ViewArgs>),
     /// List the models `--model` takes: the rigid bodies of the scenes, and the example
     /// models (`soda run --model epidemic`, `soda verify --model phold`).
     Models,
@@ -121,6 +129,11 @@ fn run_rigid(cli: Cli, matches: &clap::ArgMatches) -> anyhow::Result<()> {
             resume::resume(&args, sub)
         }
         Command::Scenes(args) => scenes::scenes(&args),
+        Command::View(args) => {
+            let empty = clap::ArgMatches::default();
+            let sub = matches.subcommand_matches("view").unwrap_or(&empty);
+            view::view(&args, sub)
+        }
         Command::Verify(args) => verify::verify(&args),
         Command::Plot(args) => plot::plot(&args),
         Command::Experiment(args) => experiment::experiment(&args),

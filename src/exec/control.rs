@@ -2,6 +2,7 @@
 //! and stop the run after the current frame.
 
 use super::error::InputError;
+use super::live::LiveStatus;
 use crate::kernel::Input;
 use crate::model::Step;
 
@@ -12,6 +13,7 @@ use crate::model::Step;
 pub struct RunControl<'a, S> {
     earliest: Step,
     post: &'a mut dyn FnMut(Step, Input<S>) -> Result<(), InputError>,
+    probe: Option<&'a mut dyn FnMut() -> LiveStatus>,
     stop: bool,
 }
 
@@ -25,8 +27,23 @@ impl<'a, S> RunControl<'a, S> {
         RunControl {
             earliest,
             post,
+            probe: None,
             stop: false,
         }
+    }
+
+    /// The same control, able to show the run's [`LiveStatus`] through `probe` (the Time
+    /// Warp executors).
+    pub(crate) fn with_probe(mut self, probe: &'a mut dyn FnMut() -> LiveStatus) -> Self {
+        self.probe = Some(probe);
+        self
+    }
+
+    /// The run's progress now: GVT, each world's LVT, territory and rollbacks (`None` on
+    /// the reference executor, which has no worlds). Each call looks at every world, so a
+    /// display asks at its own rate, not for every frame; looking never changes the run.
+    pub fn live_status(&mut self) -> Option<LiveStatus> {
+        self.probe.as_mut().map(|p| p())
     }
 
     /// The earliest step an input could name when this frame was handed over: the step

@@ -5,6 +5,7 @@ pub mod clock;
 pub mod contract;
 pub mod control;
 pub mod error;
+pub mod live;
 mod load;
 pub mod reference;
 mod schedule;

@@ -26,6 +26,7 @@ use super::clock::thread_cpu_seconds;
 use super::control::RunControl;
 pub use super::error::ExecError;
 use super::error::InputError;
+use super::live::{LiveStatus, WorldStatus};
 use super::load::LoadMeter;
 use super::schedule::Schedule;
 use super::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex, StdFacade};
@@ -117,6 +118,11 @@ impl RunStatus {
 /// The `spins` the output stage passes to [`Facade::pause`]: it polls at a slow pace.
 const OUTPUT_PAUSE: u32 = u32::MAX;
 
+/// GVT stays within this many optimism windows (of at least 8 steps) of the last step the
+/// sink was handed: committed frames the sink has not taken are held in memory, so a slow
+/// sink must slow the run, not grow it (SPEC.md §K7).
+const UNDELIVERED_WINDOWS: Step = 4;
+
 /// The state of a threaded run that the worker threads and the output stage share.
 struct SharedRun<M: CellModel + 'static, F: Facade> {
     /// The worlds, each under its own lock (a world runs on one thread at a time).
@@ -144,6 +150,12 @@ struct SharedRun<M: CellModel + 'static, F: Facade> {
     gvt: F::Atomic,
     /// The last step whose frame went to the output stage (0 before any).
     committed: F::Atomic,
+    /// The last step the sink has been handed (0 before any).
+    delivered: F::Atomic,
+    /// How far GVT may run ahead of the sink: a sink that takes its time (a display
+    /// showing frames in real time, a slow disk) holds the run back instead of letting
+    /// undelivered frames pile up in memory ([`UNDELIVERED_WINDOWS`] optimism windows).
+    undelivered: Step,
     /// 1 while a thread computes GVT or posts an input (they exclude each other).
     gvt_round: F::Atomic,
     /// A [`RunStatus`] as its `u64`.
@@ -514,7 +526,8 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         let mut advanced = false;
         for _ in 0..4 {
             let before = self.version.load();
-            let mut least = self.target.load() + 1;
+            let mut least =
+                (self.target.load() + 1).min(self.delivered.load() + 1 + self.undelivered);
             for w in 0..self.worlds.len() {
                 least = least
                     .min(self.published[w].load())
@@ -839,6 +852,8 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         waiting: Injector::new(),
         gvt: F::Atomic::new(1),
         committed: F::Atomic::new(0),
+        delivered: F::Atomic::new(0),
+        undelivered: UNDELIVERED_WINDOWS * config.window.max(8),
         gvt_round: F::Atomic::new(0),
         status: F::Atomic::new(if steps == 0 {
             RunStatus::Done as u64
@@ -878,8 +893,18 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
                 delivered += 1;
                 let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
                 let mut post = |step: Step, input: Input<M::State>| poster.post_input(step, input);
-                let mut control = RunControl::new(poster.gvt.load(), &mut post);
+                let mut probe = || LiveStatus {
+                    gvt: poster.gvt.load(),
+                    worlds: poster
+                        .worlds
+                        .iter()
+                        .map(|w| WorldStatus::of(&w.lock().world))
+                        .collect(),
+                };
+                let mut control =
+                    RunControl::new(poster.gvt.load(), &mut post).with_probe(&mut probe);
                 sink(&frame, refs.as_deref(), &mut control);
+                poster.delivered.store(t);
                 if control.stopped() {
                     stopped = true;
                     poster.stop.store(1);

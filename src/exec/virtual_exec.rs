@@ -39,6 +39,7 @@
 
 use super::control::RunControl;
 use super::error::{ExecError, InputError};
+use super::live::{LiveStatus, WorldStatus};
 use super::load::LoadMeter;
 use super::sync::panic_message;
 use crate::frame::{Event, Frame, StatesWanted};
@@ -654,7 +655,13 @@ impl<M: CellModel> VirtualRun<M> {
                 pending.push((step, input));
                 Ok(())
             };
-            let mut control = RunControl::new(floor, &mut post);
+            let gvt = self.gvt;
+            let worlds = &self.worlds;
+            let mut probe = || LiveStatus {
+                gvt,
+                worlds: worlds.iter().map(WorldStatus::of).collect(),
+            };
+            let mut control = RunControl::new(floor, &mut post).with_probe(&mut probe);
             let states = wanted.wants(t, frame.hash).then_some(&all[..]);
             sink(frame, states, &mut control);
             let stop = control.stopped();
