@@ -4,6 +4,7 @@
 //! bar. `--quick` runs a small version in well under a minute (used by the tests).
 
 mod peak;
+mod peak_display;
 
 use super::table::{csv_line, run_row};
 use anyhow::{bail, Context, Result};
@@ -26,7 +27,8 @@ Examples:
   soda experiment scalability --out results     results/scalability.csv and .svg
   soda experiment sync-share
   soda experiment peak-resistance --out results  also peak-resistance-gaps.svg and -cost.csv/.svg
-  soda experiment raw-performance";
+  soda experiment raw-performance
+  soda experiment peak-display --quick           the peak with a display draining the buffer";
 
 /// The experiments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -49,6 +51,10 @@ pub enum ExperimentName {
     /// costed as collisions during it over collisions before, against the optimism window
     /// (threaded executor, W = 1..64): wall time, gaps between committed frames, rollbacks.
     PeakResistance,
+    /// The same peak with a display in the loop, as `soda view` shows a run: committed
+    /// frames drained at 24 and 60 frames per second from a buffer of B frames (filled
+    /// before playing); per window and buffer, whether the display starves during the peak.
+    PeakDisplay,
 }
 
 impl ExperimentName {
@@ -59,6 +65,7 @@ impl ExperimentName {
             Self::SyncShare => "sync-share",
             Self::RpEfficiency => "rp-efficiency",
             Self::PeakResistance => "peak-resistance",
+            Self::PeakDisplay => "peak-display",
         }
     }
 }
@@ -96,6 +103,7 @@ pub fn experiment(args: &ExperimentArgs) -> Result<()> {
         ExperimentName::SyncShare => sync_share(args.quick, &svg)?,
         ExperimentName::RpEfficiency => rp_efficiency(args.quick, &svg)?,
         ExperimentName::PeakResistance => peak::peak_resistance(args.quick, &svg)?,
+        ExperimentName::PeakDisplay => peak_display::peak_display(args.quick, &svg)?,
     };
     write_csv(&csv, &rows)?;
     println!("wrote {}", csv.display());

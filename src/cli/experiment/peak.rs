@@ -29,7 +29,7 @@ const CONTACT_TOLERANCE: f32 = 0.01;
 const PEAK_THRESHOLD: f64 = 2.0;
 
 /// The reference run's cost of every step.
-struct Profile {
+pub(super) struct Profile {
     /// Per step `t` (computing `t → t + 1`): contacts processed, see [`collisions`].
     collisions: Vec<u64>,
     /// Per step: summed wall time of the cell computations, s.
@@ -39,19 +39,19 @@ struct Profile {
     /// Every cell computation's cost, for the model.
     cells: Vec<CellCost>,
     /// Hash of the final state (16 hex digits).
-    hash: String,
+    pub(super) hash: String,
 }
 
 /// Where the peak is and what it costs.
-struct PeakWindow {
+pub(super) struct PeakWindow {
     /// First step at which a cube of the burst touches something.
-    landing: usize,
+    pub(super) landing: usize,
     /// Last step whose collisions exceed [`PEAK_THRESHOLD`] × the baseline.
-    end: usize,
+    pub(super) end: usize,
     /// Mean collisions per step before the landing (steps 1..landing).
     baseline: f64,
     /// The thesis's peak cost: mean collisions over the peak / the baseline.
-    collision_ratio: f64,
+    pub(super) collision_ratio: f64,
     /// The same with the reference's compute time per step.
     compute_ratio: f64,
 }
@@ -125,7 +125,7 @@ fn collisions(state: &CellStates<Body>, grid: &Grid, model: &RigidBodyModel) -> 
 
 /// Runs the reference for `steps` steps, counting each step's collisions and timing its
 /// cell computations.
-fn profile(s: &Scene, steps: u64) -> Profile {
+pub(super) fn profile(s: &Scene, steps: u64) -> Profile {
     let (model, grid) = (s.model(), s.grid());
     let (mut run, _) = ReferenceRun::new(model.clone(), grid.clone(), s.initial_bodies());
     run.record_costs(true);
@@ -151,7 +151,7 @@ fn profile(s: &Scene, steps: u64) -> Profile {
 
 impl PeakWindow {
     /// Finds the peak in a profile, or explains why there is none.
-    fn find(p: &Profile) -> Result<PeakWindow> {
+    pub(super) fn find(p: &Profile) -> Result<PeakWindow> {
         let Some(landing) = p.burst_touching.iter().position(|&t| t).filter(|&l| l > 1) else {
             bail!("the burst never landed in this run: run more steps (it lands near step 90)");
         };

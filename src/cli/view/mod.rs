@@ -10,8 +10,8 @@
 
 mod actions;
 mod assets;
-mod frames;
-mod playback;
+pub(super) mod frames;
+pub(super) mod playback;
 mod server;
 
 use super::exec_args::{ExecutorArg, ExecutorArgs};

@@ -35,6 +35,8 @@ pub struct Playback {
     /// The playback speed's bits (f64).
     speed: AtomicU64,
     starved: AtomicU32,
+    /// The step the display was waiting for at each starvation.
+    starved_steps: Mutex<Vec<u64>>,
     /// Whether the run delivered its last frame.
     finished: AtomicBool,
     /// Whether the viewer is shutting down.
@@ -54,6 +56,7 @@ impl Playback {
             paused: AtomicBool::new(false),
             speed: AtomicU64::new(1.0f64.to_bits()),
             starved: AtomicU32::new(0),
+            starved_steps: Mutex::new(Vec::new()),
             finished: AtomicBool::new(false),
             closing: AtomicBool::new(false),
             shown: watch::channel(None).0,
@@ -82,6 +85,12 @@ impl Playback {
     /// Whether the viewer is closing.
     pub fn closing(&self) -> bool {
         self.closing.load(Ordering::SeqCst)
+    }
+
+    /// The step the display was waiting for at each starvation so far (a tick that found
+    /// the buffer empty while playing, after the buffer first filled).
+    pub fn starved_steps(&self) -> Vec<u64> {
+        self.starved_steps.lock().expect("starvations").clone()
     }
 
     /// Frames waiting to be shown.
@@ -127,9 +136,16 @@ impl Playback {
         self.shown.borrow().as_ref().map_or(0, |s| s.step)
     }
 
-    /// The display clock: shows the next buffered frame every `1 / (fps · speed)` seconds
-    /// until [`close`](Self::close). Runs on its own thread.
+    /// The display clock: once the buffer is full (or the run over), shows the next
+    /// buffered frame every `1 / (fps · speed)` seconds until [`close`](Self::close), like a
+    /// video player that prerolls before it plays. Runs on its own thread.
     pub fn run_clock(&self) {
+        while !self.closing.load(Ordering::SeqCst)
+            && !self.finished.load(Ordering::SeqCst)
+            && self.buffered() < self.capacity
+        {
+            std::thread::sleep(Duration::from_millis(5));
+        }
         let started = Instant::now();
         let mut next = Instant::now();
         // Frames shown in the last second, for the measured rate.
