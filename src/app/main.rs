@@ -77,7 +77,7 @@ pub struct KernelArgs {
 
 impl KernelArgs {
     fn config(&self) -> Result<KernelConfig> {
-        let partition = PartitionKind::parse(&self.partition).ok_or_else(|| {
+        let partition: PartitionKind = self.partition.parse().map_err(|_| {
             anyhow!(
                 "--partition {}: use blocks, kmeans or random",
                 self.partition

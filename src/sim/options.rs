@@ -22,12 +22,7 @@ impl ExecutorKind {
     /// Every executor, reference first.
     pub const ALL: [ExecutorKind; 3] = [Self::Reference, Self::Virtual, Self::Threaded];
 
-    /// Parses `reference`, `virtual` or `threaded`.
-    pub fn parse(s: &str) -> Option<Self> {
-        s.parse().ok()
-    }
-
-    /// The name [`parse`](Self::parse) accepts.
+    /// Its name (what [`FromStr`] reads): `reference`, `virtual` or `threaded`.
     pub fn name(self) -> &'static str {
         match self {
             Self::Reference => "reference",
