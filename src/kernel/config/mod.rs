@@ -132,8 +132,12 @@ pub struct KernelConfig {
     /// Ghost policy of the optimistic modes.
     #[serde(default)]
     pub ghosts: GhostPolicy,
-    /// A deliberate bug, for tests that prove the checks can fire.
+    /// A deliberate bug, for tests and `soda verify --planted-bug` that prove the checks can
+    /// fire. A verification hook, not part of a run's description: it is never serialised
+    /// (checkpoints do not hold it, a resumed run has none) and reads back as
+    /// [`PlantedBug::None`].
     #[doc(hidden)]
+    #[serde(skip)]
     pub planted_bug: PlantedBug,
 }
 
@@ -223,5 +227,27 @@ impl KernelConfig {
     pub fn record_schedule(mut self, on: bool) -> Self {
         self.record_schedule = on;
         self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_planted_bug_is_not_serialised_and_old_documents_still_read() {
+        let config = KernelConfig {
+            planted_bug: PlantedBug::DropLoneAnti,
+            ..KernelConfig::new(3)
+        };
+        let json = serde_json::to_string(&config).unwrap();
+        assert!(!json.contains("planted_bug"), "{json}");
+        let back: KernelConfig = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, KernelConfig::new(3));
+        // Checkpoints written before carry the field: it is ignored.
+        let mut old: serde_json::Value = serde_json::from_str(&json).unwrap();
+        old["planted_bug"] = "DropLoneAnti".into();
+        let back: KernelConfig = serde_json::from_value(old).unwrap();
+        assert_eq!(back.planted_bug, PlantedBug::None);
     }
 }
