@@ -66,6 +66,12 @@ pub struct RunOptions {
     pub kernel: KernelConfig,
     /// OS threads of the threaded executor (at least 1).
     pub threads: usize,
+    /// The threaded executor's laggard lead ([`ThreadedOptions::lead`]; 0 by default, and in
+    /// checkpoints written before it moved here).
+    ///
+    /// [`ThreadedOptions::lead`]: crate::exec::threaded::ThreadedOptions::lead
+    #[serde(default)]
+    pub lead: u64,
 }
 
 impl RunOptions {
@@ -80,6 +86,7 @@ impl RunOptions {
             executor: ExecutorKind::Virtual,
             kernel,
             threads: 1,
+            lead: 0,
         }
     }
 
@@ -89,6 +96,13 @@ impl RunOptions {
             executor: ExecutorKind::Threaded,
             kernel,
             threads,
+            lead: 0,
         }
+    }
+
+    /// The same options with the threaded executor's laggard lead `lead`.
+    pub fn lead(mut self, lead: u64) -> Self {
+        self.lead = lead;
+        self
     }
 }

@@ -123,12 +123,6 @@ pub struct KernelConfig {
     /// Dynamic load balancing (off by default).
     #[serde(default)]
     pub balance: BalanceConfig,
-    /// Threaded executor, optimistic modes: how many steps a world may compute ahead of the
-    /// slowest of its neighbour worlds before it lets laggards run first (SPEC.md §10). 0 runs the
-    /// worlds nearly in lockstep (few rollbacks); more lets a world speculate past a slower
-    /// neighbour, up to the window.
-    #[serde(default)]
-    pub lead: u64,
     /// Ghost policy of the optimistic modes.
     #[serde(default)]
     pub ghosts: GhostPolicy,
@@ -153,7 +147,6 @@ impl Default for KernelConfig {
             record_schedule: true,
             trace: false,
             balance: BalanceConfig::default(),
-            lead: 0,
             ghosts: GhostPolicy::Delta,
             planted_bug: PlantedBug::None,
         }
@@ -217,12 +210,6 @@ impl KernelConfig {
         self
     }
 
-    /// Sets the threaded executor's laggard lead (see [`KernelConfig::lead`]).
-    pub fn lead(mut self, lead: u64) -> Self {
-        self.lead = lead;
-        self
-    }
-
     /// Turns decision recording on or off.
     pub fn record_schedule(mut self, on: bool) -> Self {
         self.record_schedule = on;
@@ -236,6 +223,7 @@ mod tests {
 
     #[test]
     fn a_planted_bug_is_not_serialised_and_old_documents_still_read() {
+        // (Older documents also carry `lead`, now an executor setting: ignored too.)
         let config = KernelConfig {
             planted_bug: PlantedBug::DropLoneAnti,
             ..KernelConfig::new(3)
@@ -247,6 +235,7 @@ mod tests {
         // Checkpoints written before carry the field: it is ignored.
         let mut old: serde_json::Value = serde_json::from_str(&json).unwrap();
         old["planted_bug"] = "DropLoneAnti".into();
+        old["lead"] = 3.into();
         let back: KernelConfig = serde_json::from_value(old).unwrap();
         assert_eq!(back.planted_bug, PlantedBug::None);
     }
