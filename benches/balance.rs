@@ -31,7 +31,8 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 mod knobs;
 
 use knobs::{env, median, median_ratio};
-use soda::exec::threaded::{run_threaded, ThreadedReport};
+use soda::exec::sync::StdFacade;
+use soda::exec::threaded::{run_threaded_with, ThreadedOptions, ThreadedReport, ThreadedSetup};
 use soda::kernel::{BalanceConfig, GhostPolicy, KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
 use std::io::Write;
@@ -86,16 +87,12 @@ fn main() {
         let config = KernelConfig::new(worlds)
             .mode(RollbackMode::Cell)
             .window(16)
-            .lead(lead)
             .ghosts(ghosts)
             .balance(balance.clone());
-        run_threaded(
-            scene.model(),
-            scene.grid(),
-            scene.initial_bodies(),
-            &config,
-            threads,
-            steps,
+        run_threaded_with::<_, StdFacade>(
+            ThreadedSetup::new(scene.model(), scene.grid(), scene.initial_bodies()),
+            &ThreadedOptions::new(&config, threads, steps).lead(lead),
+            |_, _| {},
         )
         .expect("threaded run")
     };

@@ -47,6 +47,7 @@ fn options(executor: ExecutorKind, kernel: KernelConfig, threads: usize) -> RunO
         executor,
         kernel,
         threads,
+        lead: 0,
     }
 }
 

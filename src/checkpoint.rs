@@ -36,7 +36,31 @@ pub trait ExactState: Sized {
     fn to_words(&self, out: &mut Vec<u64>);
     /// Reads a state back from the words [`to_words`](Self::to_words) wrote; an error names
     /// what is wrong with them.
-    fn from_words(words: &[u64]) -> Result<Self, String>;
+    fn from_words(words: &[u64]) -> Result<Self, StateDecodeError>;
+}
+
+/// Why words do not decode as a state ([`ExactState::from_words`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum StateDecodeError {
+    /// A state of this kind has another number of words.
+    #[error("{what} has {expected} words, this one {found}")]
+    WordCount {
+        /// The kind of state, with its article (`a body`).
+        what: &'static str,
+        /// The words a state of this kind has.
+        expected: usize,
+        /// The words found.
+        found: usize,
+    },
+    /// A word holding a 32-bit field has higher bits set.
+    #[error("word {0} is not 32 bits")]
+    Not32Bits(usize),
+    /// A word holding a float holds a NaN or an infinity.
+    #[error("word {0} is not a finite number")]
+    NotFinite(usize),
+    /// A field's value is none of those it can take (the message says which).
+    #[error("{0}")]
+    BadValue(String),
 }
 
 /// One checkpoint: the committed states of `step` and the application's description `R` of
@@ -102,7 +126,7 @@ pub enum CheckpointError {
         /// Position of the state in the file.
         index: usize,
         /// What is wrong.
-        reason: String,
+        reason: StateDecodeError,
     },
     /// The states are not in strictly ascending id order (a duplicate or reordered entity).
     #[error("the checkpoint's states are not in strictly ascending id order at id {id}")]
@@ -263,10 +287,14 @@ impl ExactState for crate::models::epidemic::Agent {
         out.extend([u64::from(self.since), self.next_id, self.end_id]);
     }
 
-    fn from_words(w: &[u64]) -> Result<Self, String> {
+    fn from_words(w: &[u64]) -> Result<Self, StateDecodeError> {
         use crate::models::epidemic::Health;
         if w.len() != 11 {
-            return Err(format!("an agent has 11 words, this one {}", w.len()));
+            return Err(StateDecodeError::WordCount {
+                what: "an agent",
+                expected: 11,
+                found: w.len(),
+            });
         }
         let f = |k: usize| finite_f32(w, k);
         Ok(crate::models::epidemic::Agent {
@@ -277,9 +305,13 @@ impl ExactState for crate::models::epidemic::Agent {
                 0 => Health::Susceptible,
                 1 => Health::Infected,
                 2 => Health::Recovered,
-                other => return Err(format!("health {other} is not 0, 1 or 2")),
+                other => {
+                    return Err(StateDecodeError::BadValue(format!(
+                        "health {other} is not 0, 1 or 2"
+                    )))
+                }
             },
-            since: u32::try_from(w[8]).map_err(|_| "word 8 is not 32 bits".to_string())?,
+            since: u32::try_from(w[8]).map_err(|_| StateDecodeError::Not32Bits(8))?,
             next_id: w[9],
             end_id: w[10],
         })
@@ -294,9 +326,13 @@ impl ExactState for crate::models::phold::Job {
         out.push(self.value);
     }
 
-    fn from_words(w: &[u64]) -> Result<Self, String> {
+    fn from_words(w: &[u64]) -> Result<Self, StateDecodeError> {
         if w.len() != 5 {
-            return Err(format!("a job has 5 words, this one {}", w.len()));
+            return Err(StateDecodeError::WordCount {
+                what: "a job",
+                expected: 5,
+                found: w.len(),
+            });
         }
         let f = |k: usize| finite_f32(w, k);
         Ok(crate::models::phold::Job {
@@ -308,13 +344,13 @@ impl ExactState for crate::models::phold::Job {
 }
 
 /// Word `k` of `w` as the finite f32 whose bits it holds.
-fn finite_f32(w: &[u64], k: usize) -> Result<f32, String> {
-    let bits = u32::try_from(w[k]).map_err(|_| format!("word {k} is not 32 bits"))?;
+fn finite_f32(w: &[u64], k: usize) -> Result<f32, StateDecodeError> {
+    let bits = u32::try_from(w[k]).map_err(|_| StateDecodeError::Not32Bits(k))?;
     let v = f32::from_bits(bits);
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(format!("word {k} is not a finite number"))
+        Err(StateDecodeError::NotFinite(k))
     }
 }
 
@@ -342,19 +378,23 @@ impl ExactState for crate::physics::Body {
         out.push(u64::from(self.rest_steps));
     }
 
-    fn from_words(words: &[u64]) -> Result<Self, String> {
+    fn from_words(words: &[u64]) -> Result<Self, StateDecodeError> {
         use crate::math::{Quat, Vec3};
         use crate::physics::Shape;
         if words.len() != 25 {
-            return Err(format!("a body has 25 words, this one {}", words.len()));
+            return Err(StateDecodeError::WordCount {
+                what: "a body",
+                expected: 25,
+                found: words.len(),
+            });
         }
         let mut floats = [0f32; 23];
         for (k, &w) in words[2..].iter().take(23).enumerate() {
-            let bits = u32::try_from(w).map_err(|_| format!("word {} is not 32 bits", k + 2))?;
+            let bits = u32::try_from(w).map_err(|_| StateDecodeError::Not32Bits(k + 2))?;
             floats[k] = f32::from_bits(bits);
         }
         if let Some(k) = floats[..22].iter().position(|v| !v.is_finite()) {
-            return Err(format!("word {} is not a finite number", k + 2));
+            return Err(StateDecodeError::NotFinite(k + 2));
         }
         let v3 = |k: usize| Vec3::new(floats[k], floats[k + 1], floats[k + 2]);
         let shape = match words[1] {
@@ -363,13 +403,13 @@ impl ExactState for crate::physics::Body {
                 half_extents: [floats[0], floats[1], floats[2]],
             },
             other => {
-                return Err(format!(
+                return Err(StateDecodeError::BadValue(format!(
                     "shape kind {other} is neither 0 (ball) nor 1 (cuboid)"
-                ))
+                )))
             }
         };
         let rest_steps = u32::try_from(words[24])
-            .map_err(|_| "the rest-step count is not 32 bits".to_string())?;
+            .map_err(|_| StateDecodeError::BadValue("the rest-step count is not 32 bits".into()))?;
         let q = nalgebra::Quaternion::new(floats[12], floats[13], floats[14], floats[15]);
         Ok(crate::physics::Body {
             id: words[0],
@@ -468,19 +508,19 @@ mod tests {
     fn words_that_are_not_a_body_are_refused_with_the_reason() {
         let mut words = Vec::new();
         body(1, true, [0.5; 12], 0).to_words(&mut words);
-        assert!(Body::from_words(&words[..24])
-            .unwrap_err()
-            .contains("25 words"));
+        let reason = |w: &[u64]| Body::from_words(w).unwrap_err().to_string();
+        assert!(reason(&words[..24]).contains("25 words"));
         let mut bad_shape = words.clone();
         bad_shape[1] = 7;
-        assert!(Body::from_words(&bad_shape)
-            .unwrap_err()
-            .contains("shape kind 7"));
+        assert!(reason(&bad_shape).contains("shape kind 7"));
         let mut nan = words.clone();
         nan[12] = u64::from(f32::NAN.to_bits());
-        assert!(Body::from_words(&nan).unwrap_err().contains("word 12"));
+        assert_eq!(
+            Body::from_words(&nan).unwrap_err(),
+            StateDecodeError::NotFinite(12)
+        );
         let mut wide = words;
         wide[5] = 1 << 40;
-        assert!(Body::from_words(&wide).unwrap_err().contains("word 5"));
+        assert!(reason(&wide).contains("word 5"));
     }
 }

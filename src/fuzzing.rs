@@ -28,7 +28,7 @@ use crate::frame::Frame;
 use crate::grid::Grid;
 use crate::kernel::synthetic::Particles;
 use crate::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode};
-use crate::model::CellModel;
+use crate::model::{CellModel, Step};
 use crate::scene::builtin::builtin;
 use crate::scene::{parse_scene, Scene, SceneFormat};
 use arbitrary::{Arbitrary, Unstructured};
@@ -243,13 +243,13 @@ impl SyncOrderInput {
 /// # Panics
 /// If the kernel itself panics (a locality violation it detects, a deadlock): that is a
 /// finding too.
-pub fn check_sync_order(input: &SyncOrderInput, bug: PlantedBug) -> Result<(), String> {
+pub fn check_sync_order(input: &SyncOrderInput, bug: PlantedBug) -> Result<(), SyncOrderError> {
     check_case(&input.case(bug))
 }
 
 /// [`check_sync_order`] for an explicit case, e.g. one whose schedule was replaced by the
 /// replay string of a failure.
-pub fn check_case(case: &SyncOrderCase) -> Result<(), String> {
+pub fn check_case(case: &SyncOrderCase) -> Result<(), SyncOrderError> {
     match case.scene {
         FuzzScene::Particles(n, dims, open, seed) => {
             let (model, grid, bodies) = Particles::scene(n, dims, open, seed);
@@ -260,9 +260,7 @@ pub fn check_case(case: &SyncOrderCase) -> Result<(), String> {
                 .unwrap_or_else(|e| panic!("built-in scene {name} with {n} bodies: {e}"));
             compare(scene.model(), scene.grid(), scene.initial_bodies(), case)
         }
-        FuzzScene::Custom => Err(
-            "a custom scene is checked with check_model_sync_order, which holds the model".into(),
-        ),
+        FuzzScene::Custom => Err(SyncOrderError::CustomScene),
     }
 }
 
@@ -325,7 +323,7 @@ pub fn check_model_sync_order<M: CellModel + Clone>(
     initial: Vec<M::State>,
     config: &KernelConfig,
     steps: u64,
-) -> Result<(), String> {
+) -> Result<(), SyncOrderError> {
     compare(
         model,
         grid,
@@ -343,49 +341,126 @@ fn compare<M: CellModel + Clone>(
     grid: Grid,
     bodies: Vec<M::State>,
     case: &SyncOrderCase,
-) -> Result<(), String> {
+) -> Result<(), SyncOrderError> {
     let (mut reference, _) = ReferenceRun::new(model.clone(), grid.clone(), bodies.clone());
     let expected: Vec<Frame<M::Event>> = (0..case.steps).map(|_| reference.advance()).collect();
     let (mut run, _) = VirtualRun::new(model, grid, bodies, &case.config);
     let frames = run.run(case.steps);
     let c = &case.config;
-    let describe = || {
-        format!(
-            "scene: {}, {} steps\nconfig: {} worlds, mode {}, window {}, partition {:?} \
-             (seed {}), planted bug {:?}\nreplay with ScheduleSpec::Replay(parse_schedule(..)): {}",
-            case.scene,
-            case.steps,
-            c.worlds,
-            c.mode.name(),
-            c.window,
-            c.partition,
-            c.partition_seed,
-            c.planted_bug,
-            run.schedule_string()
-        )
-    };
+    let case_text = format!(
+        "scene: {}, {} steps\nconfig: {} worlds, mode {}, window {}, partition {:?} \
+         (seed {}), planted bug {:?}",
+        case.scene,
+        case.steps,
+        c.worlds,
+        c.mode,
+        c.window,
+        c.partition,
+        c.partition_seed,
+        c.planted_bug,
+    );
     if frames.len() != expected.len() {
-        return Err(format!(
-            "{} committed frames, expected {}\n{}",
-            frames.len(),
-            expected.len(),
-            describe()
-        ));
+        return Err(SyncOrderError::FrameCount {
+            committed: frames.len(),
+            expected: expected.len(),
+            case: case_text,
+            schedule: run.schedule_string(),
+        });
     }
     match frames.iter().zip(&expected).find(|(a, b)| a != b) {
         None => Ok(()),
-        Some((a, b)) => Err(format!(
-            "first divergence at step {}: kernel hash {:016x} ({} bodies, {} events) vs \
-             reference {:016x} ({} bodies, {} events)\n{}",
-            b.step,
-            a.hash,
-            a.bodies,
-            a.events.len(),
-            b.hash,
-            b.bodies,
-            b.events.len(),
-            describe()
-        )),
+        Some((a, b)) => Err(SyncOrderError::Diverged {
+            step: b.step,
+            kernel: FrameSummary::of(a),
+            reference: FrameSummary::of(b),
+            case: case_text,
+            schedule: run.schedule_string(),
+        }),
+    }
+}
+
+/// Why a synchronisation-order check failed ([`check_sync_order`], [`check_case`],
+/// [`check_model_sync_order`]). The messages of a failed comparison end with the case and
+/// the schedule string that replays it.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SyncOrderError {
+    /// [`check_case`] was given a [`FuzzScene::Custom`] case, whose model it does not hold.
+    #[error("a custom scene is checked with check_model_sync_order, which holds the model")]
+    CustomScene,
+    /// The virtual executor committed another number of frames than the reference.
+    #[error(
+        "{committed} committed frames, expected {expected}\n{case}\nreplay with \
+         ScheduleSpec::Replay(parse_schedule(..)): {schedule}"
+    )]
+    FrameCount {
+        /// Frames the virtual executor committed.
+        committed: usize,
+        /// Frames the reference committed.
+        expected: usize,
+        /// The scene, steps and configuration.
+        case: String,
+        /// The schedule string that replays the run.
+        schedule: String,
+    },
+    /// A committed frame differs from the reference's.
+    #[error(
+        "first divergence at step {step}: kernel hash {kernel} vs reference {reference}\n{case}\n\
+         replay with ScheduleSpec::Replay(parse_schedule(..)): {schedule}"
+    )]
+    Diverged {
+        /// The first step whose frames differ.
+        step: Step,
+        /// The virtual executor's frame there.
+        kernel: FrameSummary,
+        /// The reference's frame there.
+        reference: FrameSummary,
+        /// The scene, steps and configuration.
+        case: String,
+        /// The schedule string that replays the run.
+        schedule: String,
+    },
+}
+
+impl SyncOrderError {
+    /// The schedule string that replays the failed run (`parse_schedule` reads it), if the
+    /// check ran.
+    pub fn schedule(&self) -> Option<&str> {
+        match self {
+            Self::CustomScene => None,
+            Self::FrameCount { schedule, .. } | Self::Diverged { schedule, .. } => Some(schedule),
+        }
+    }
+}
+
+/// What [`SyncOrderError::Diverged`] shows of a frame: written as its hash (16 hex digits)
+/// and its body and event counts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameSummary {
+    /// The frame's hash.
+    pub hash: u64,
+    /// Its number of bodies.
+    pub bodies: usize,
+    /// Its number of events.
+    pub events: usize,
+}
+
+impl FrameSummary {
+    fn of<E>(frame: &Frame<E>) -> Self {
+        FrameSummary {
+            hash: frame.hash,
+            bodies: frame.bodies,
+            events: frame.events.len(),
+        }
+    }
+}
+
+impl std::fmt::Display for FrameSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{:016x} ({} bodies, {} events)",
+            self.hash, self.bodies, self.events
+        )
     }
 }
 

@@ -235,7 +235,7 @@ fn migration_across_a_border_inside_a_rolled_back_interval_is_cancelled() {
     );
     let crossing = migrate[0].clone();
     assert_eq!(crossing.bodies.len(), 1);
-    assert_eq!(crossing.bodies[0].0, 2);
+    assert_eq!(crossing.bodies[0].cell, 2);
     assert!(w1.cell_state(3, 5).unwrap().is_empty());
 
     w1.receive(r.ghost_of_cell_2());

@@ -2,7 +2,10 @@
 //! world count, partition and rollback mode, and fails cleanly when a world panics.
 
 use soda::exec::reference::ReferenceRun;
-use soda::exec::threaded::{run_threaded, ExecError};
+use soda::exec::sync::StdFacade;
+use soda::exec::threaded::{
+    run_threaded, run_threaded_with, ExecError, ThreadedOptions, ThreadedSetup,
+};
 use soda::frame::Event;
 use soda::grid::Grid;
 use soda::hash::StateHash;
@@ -260,14 +263,11 @@ fn threaded_runs_with_a_laggard_lead_speculate_and_still_match_the_reference_bit
         let mut rolled_back = 0;
         for lead in [1, 4, 16] {
             for _ in 0..2 {
-                let config = KernelConfig::new(6).window(16).lead(lead);
-                let report = run_threaded(
-                    scene.model(),
-                    scene.grid(),
-                    scene.initial_bodies(),
-                    &config,
-                    2,
-                    40,
+                let config = KernelConfig::new(6).window(16);
+                let report = run_threaded_with::<_, StdFacade>(
+                    ThreadedSetup::new(scene.model(), scene.grid(), scene.initial_bodies()),
+                    &ThreadedOptions::new(&config, 2, 40).lead(lead),
+                    |_, _| {},
                 )
                 .unwrap();
                 assert_eq!(

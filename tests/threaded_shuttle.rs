@@ -7,7 +7,7 @@
 //!
 //! A failing schedule prints a shuttle replay string; `SHUTTLE_ITERATIONS` raises the count.
 
-use soda::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
+use soda::exec::sync::{Facade, FacadeAtomic, FacadeMutex, ThreadPanicked};
 use soda::exec::threaded::{run_threaded_with, ThreadedOptions, ThreadedSetup};
 use soda::kernel::synthetic::Particles;
 use soda::kernel::{BalanceConfig, KernelConfig, LoadSource, PartitionKind, RollbackMode};
@@ -65,9 +65,9 @@ impl Facade for ShuttleFacade {
     fn spawn(f: impl FnOnce() + Send + 'static) -> Self::Handle {
         shuttle::thread::spawn(f)
     }
-    fn join(h: Self::Handle) -> Result<(), String> {
+    fn join(h: Self::Handle) -> Result<(), ThreadPanicked> {
         h.join()
-            .map_err(|_| "a shuttle thread panicked".to_string())
+            .map_err(|_| ThreadPanicked("a shuttle thread panicked".to_string()))
     }
     fn pause(_spins: u32) {
         shuttle::thread::yield_now();

@@ -43,20 +43,34 @@ extern "C" fn on_signal(signal: libc::c_int) {
     }
 }
 
+/// Why the graceful stop could not be installed (the run then proceeds without it).
+#[derive(Debug, thiserror::Error)]
+pub enum InstallError {
+    /// The watcher's pipe could not be created.
+    #[error("pipe: {0}")]
+    Pipe(std::io::Error),
+    /// The watcher thread could not be started.
+    #[error("cannot start the signal watcher: {0}")]
+    Watcher(std::io::Error),
+    /// A signal handler could not be installed.
+    #[error("sigaction: {0}")]
+    Sigaction(std::io::Error),
+}
+
 /// Installs the handlers for SIGINT and SIGTERM and starts the watcher thread. Returns an
-/// error message if the system refuses (the run then proceeds without the graceful stop).
-pub fn install() -> Result<(), String> {
+/// error if the system refuses (the run then proceeds without the graceful stop).
+pub fn install() -> Result<(), InstallError> {
     let mut fds = [0 as libc::c_int; 2];
     // SAFETY: `fds` has room for the two descriptors pipe(2) writes.
     if unsafe { libc::pipe(fds.as_mut_ptr()) } != 0 {
-        return Err(format!("pipe: {}", std::io::Error::last_os_error()));
+        return Err(InstallError::Pipe(std::io::Error::last_os_error()));
     }
     let [read_end, write_end] = fds;
     PIPE.store(write_end, Ordering::SeqCst);
     std::thread::Builder::new()
         .name("soda-signals".into())
         .spawn(move || watch(read_end))
-        .map_err(|e| format!("cannot start the signal watcher: {e}"))?;
+        .map_err(InstallError::Watcher)?;
     for signal in [libc::SIGINT, libc::SIGTERM] {
         // SAFETY: a zeroed sigaction with a handler that only touches atomics and write(2);
         // SA_RESTART keeps interrupted system calls of the run going.
@@ -68,7 +82,7 @@ pub fn install() -> Result<(), String> {
             libc::sigaction(signal, &action, std::ptr::null_mut()) == 0
         };
         if !ok {
-            return Err(format!("sigaction: {}", std::io::Error::last_os_error()));
+            return Err(InstallError::Sigaction(std::io::Error::last_os_error()));
         }
     }
     Ok(())

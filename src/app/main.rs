@@ -77,7 +77,7 @@ pub struct KernelArgs {
 
 impl KernelArgs {
     fn config(&self) -> Result<KernelConfig> {
-        let partition = PartitionKind::parse(&self.partition).ok_or_else(|| {
+        let partition: PartitionKind = self.partition.parse().map_err(|_| {
             anyhow!(
                 "--partition {}: use blocks, kmeans or random",
                 self.partition
@@ -238,6 +238,7 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                 executor,
                 kernel: a.kernel.config()?.mode(parse_mode(&a.mode)?),
                 threads: threads(a.threads),
+                lead: 0,
             };
             let checkpoint = match &a.checkpoint {
                 Some(path) => Some(super::checkpoint::CheckpointPlan::checked(

@@ -284,7 +284,6 @@ impl ExecutorArgs {
             .partition(partition)
             .partition_seed(self.partition_seed.unwrap_or(0))
             .schedule(schedule)
-            .lead(self.lead.unwrap_or(0))
             .ghosts(self.ghosts.map_or(GhostPolicy::Delta, Into::into))
             .record_schedule(false);
         kernel.planted_bug = self.planted_bug.map_or(PlantedBug::None, Into::into);
@@ -293,6 +292,7 @@ impl ExecutorArgs {
             executor,
             kernel,
             threads,
+            lead: self.lead.unwrap_or(0),
         })
     }
 }

@@ -142,6 +142,7 @@ fn threaded(worlds: usize, threads: usize, mode: RollbackMode) -> RunOptions {
         executor: ExecutorKind::Threaded,
         kernel: KernelConfig::new(worlds).mode(mode),
         threads,
+        lead: 0,
     }
 }
 
@@ -448,6 +449,7 @@ fn rp_efficiency(quick: bool, svg: &Path) -> Result<Vec<Row>> {
                         .record_schedule(false)
                         .trace(true),
                     threads: 1,
+                    lead: 0,
                 };
                 let r = run(s, &options, steps)?;
                 let fraction = r.trace.as_ref().map_or(0.0, territory_fraction);

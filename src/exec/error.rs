@@ -1,5 +1,6 @@
 //! Why a run stopped early: the typed errors every executor returns.
 
+use super::sync::ThreadPanicked;
 use crate::kernel::partition::WorldId;
 use crate::model::{BodyId, Step};
 use thiserror::Error;
@@ -44,7 +45,28 @@ pub enum ExecError {
     },
     /// A worker thread died outside a world's step.
     #[error("worker thread failed: {0}")]
-    Thread(String),
+    Thread(#[from] ThreadPanicked),
+}
+
+/// Why a schedule string ([`parse_schedule`]) does not parse.
+///
+/// [`parse_schedule`]: super::virtual_exec::parse_schedule
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+pub enum ScheduleParseError {
+    /// The string does not start with the format's prefix.
+    #[error("a schedule string starts with {prefix:?}")]
+    MissingPrefix {
+        /// The prefix expected.
+        prefix: &'static str,
+    },
+    /// A decision is not a number.
+    #[error("bad decision {token:?}: {source}")]
+    BadDecision {
+        /// The text of the decision.
+        token: String,
+        /// Why it is not a number.
+        source: std::num::ParseIntError,
+    },
 }
 
 /// Why an input (spawn, remove, replace at a step) was refused.

@@ -69,13 +69,16 @@ pub(crate) fn input_message<M: CellModel>(
             (Vec::new(), Vec::new())
         }
     };
-    let bodies: Vec<(u32, M::State)> = adds
+    let bodies: Vec<crate::kernel::Homed<M::State>> = adds
         .into_iter()
-        .map(|s| {
+        .map(|state| {
             let c = grid
-                .cell_of(M::position(&s))
+                .cell_of(M::position(&state))
                 .expect("checked inside the grid");
-            (grid.index(c) as u32, s)
+            crate::kernel::Homed {
+                cell: grid.index(c) as u32,
+                state,
+            }
         })
         .collect();
     crate::kernel::Message {

@@ -34,6 +34,11 @@ pub trait FacadeAtomic: Send + Sync {
     fn fetch_add(&self, v: u64) -> u64;
 }
 
+/// A thread that panicked, with its panic message ([`Facade::join`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct ThreadPanicked(pub String);
+
 /// The primitives the threaded executor is written against.
 pub trait Facade: Send + Sync + 'static {
     /// Lock type.
@@ -45,7 +50,7 @@ pub trait Facade: Send + Sync + 'static {
     /// Starts a thread.
     fn spawn(f: impl FnOnce() + Send + 'static) -> Self::Handle;
     /// Waits for a thread; `Err` if it panicked.
-    fn join(h: Self::Handle) -> Result<(), String>;
+    fn join(h: Self::Handle) -> Result<(), ThreadPanicked>;
     /// Gives the processor to another thread; `spins` counts consecutive idle calls so an
     /// implementation may back off (`u32::MAX`: a poller that may sleep longest).
     fn pause(spins: u32);
@@ -101,8 +106,8 @@ impl Facade for StdFacade {
         std::thread::spawn(f)
     }
 
-    fn join(h: Self::Handle) -> Result<(), String> {
-        h.join().map_err(|e| panic_message(&*e))
+    fn join(h: Self::Handle) -> Result<(), ThreadPanicked> {
+        h.join().map_err(|e| ThreadPanicked(panic_message(&*e)))
     }
 
     fn pause(spins: u32) {

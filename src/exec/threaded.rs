@@ -166,7 +166,7 @@ struct SharedRun<M: CellModel + 'static, F: Facade> {
     /// Whether the mode is optimistic (not conservative).
     optimistic: bool,
     /// How many steps a world may compute ahead of its slowest neighbour world before it
-    /// lets laggards run first (optimistic modes; `KernelConfig::lead`).
+    /// lets laggards run first (optimistic modes; [`ThreadedOptions::lead`]).
     lead: Step,
     /// Committed steps being assembled from the worlds' contributions.
     assembly: F::Mutex<Assembly<M>>,
@@ -709,6 +709,11 @@ pub struct ThreadedOptions<'a> {
     pub steps: u64,
     /// The steps whose committed states (sorted by id) the sink gets.
     pub wanted: StatesWanted,
+    /// Optimistic modes: how many steps a world may compute ahead of the slowest of its
+    /// neighbour worlds before it lets laggards run first (SPEC.md §10). 0 runs the worlds
+    /// nearly in lockstep (few rollbacks); more lets a world speculate past a slower
+    /// neighbour, up to the window. Pacing only: the committed bits never depend on it.
+    pub lead: u64,
 }
 
 impl<'a> ThreadedOptions<'a> {
@@ -719,7 +724,14 @@ impl<'a> ThreadedOptions<'a> {
             threads,
             steps,
             wanted: StatesWanted::none(),
+            lead: 0,
         }
+    }
+
+    /// The same options with the laggard lead `lead` (see [`ThreadedOptions::lead`]).
+    pub fn lead(mut self, lead: u64) -> Self {
+        self.lead = lead;
+        self
     }
 
     /// The same options, handing the sink the committed states of the steps `wanted` asks
@@ -788,6 +800,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         threads,
         steps,
         ref wanted,
+        lead,
     } = *options;
     let ThreadedSetup {
         model,
@@ -862,7 +875,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         }),
         target: F::Atomic::new(epoch_end),
         optimistic: config.mode != crate::kernel::RollbackMode::Conservative,
-        lead: config.lead,
+        lead,
         assembly: F::Mutex::new(Assembly {
             partial: BTreeMap::new(),
             next: 1,

@@ -38,7 +38,7 @@
 //! ```
 
 use super::control::RunControl;
-use super::error::{ExecError, InputError};
+use super::error::{ExecError, InputError, ScheduleParseError};
 use super::live::{LiveStatus, WorldStatus};
 use super::load::LoadMeter;
 use super::sync::panic_message;
@@ -64,18 +64,23 @@ use std::sync::Arc;
 const SCHEDULE_PREFIX: &str = "v1:";
 
 /// Parses a string printed by [`VirtualRun::schedule_string`] into a replay schedule.
-pub fn parse_schedule(s: &str) -> Result<ScheduleSpec, String> {
+pub fn parse_schedule(s: &str) -> Result<ScheduleSpec, ScheduleParseError> {
     let body = s
         .trim()
         .strip_prefix(SCHEDULE_PREFIX)
-        .ok_or_else(|| format!("a schedule string starts with {SCHEDULE_PREFIX:?}"))?;
+        .ok_or(ScheduleParseError::MissingPrefix {
+            prefix: SCHEDULE_PREFIX,
+        })?;
     if body.is_empty() {
         return Ok(ScheduleSpec::Replay(Vec::new()));
     }
     body.split('.')
         .map(|t| {
             t.parse::<u32>()
-                .map_err(|e| format!("bad decision {t:?}: {e}"))
+                .map_err(|source| ScheduleParseError::BadDecision {
+                    token: t.to_string(),
+                    source,
+                })
         })
         .collect::<Result<Vec<_>, _>>()
         .map(ScheduleSpec::Replay)

@@ -12,9 +12,18 @@ use super::partition::WorldId;
 use crate::model::{BodyId, Step};
 use std::sync::Arc;
 
-/// A message's `(home cell, state)` pairs, shared (not copied) between the sender's log of
+/// A message's bodies with their home cells, shared (not copied) between the sender's log of
 /// what it sent, the copies for several destination worlds and the receivers' logs.
-pub type Bodies<S> = Arc<Vec<(u32, S)>>;
+pub type Bodies<S> = Arc<Vec<Homed<S>>>;
+
+/// One body a message carries and the cell that homes it at the message's step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Homed<S> {
+    /// Linear index of the body's home cell at the message's step.
+    pub cell: u32,
+    /// The body's state.
+    pub state: S,
+}
 
 /// What a message is about. Inputs sort first so that, at a given step, a world has applied
 /// them before anything can make a state of that step known (conservative mode).
@@ -37,10 +46,38 @@ pub enum Sign {
     Positive,
 }
 
-/// The total order in which a world applies the messages it has received:
-/// (step, kind, source cell, sequence number, sign). Together with the destination world
-/// this identifies a message uniquely; arrival order never matters.
-pub type MessageKey = (Step, MessageKind, u32, u32, Sign);
+/// The total order in which a world applies the messages it has received: by step, then
+/// kind, source cell, sequence number and sign — the order of the fields, which the derived
+/// `Ord` compares in turn (do not reorder them: the order of application is part of
+/// determinism). Together with the destination world this identifies a message uniquely;
+/// arrival order never matters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct MessageKey {
+    /// The message's step.
+    pub step: Step,
+    /// Its kind.
+    pub kind: MessageKind,
+    /// The cell it comes from.
+    pub src_cell: u32,
+    /// The sequence number of its version.
+    pub seq: u32,
+    /// Positive or anti.
+    pub sign: Sign,
+}
+
+impl MessageKey {
+    /// The smallest key of kind `kind` at step `step`: where the messages of that kind and
+    /// step start in the total order.
+    pub fn first_of(step: Step, kind: MessageKind) -> Self {
+        MessageKey {
+            step,
+            kind,
+            src_cell: 0,
+            seq: 0,
+            sign: Sign::Anti,
+        }
+    }
+}
 
 /// A timestamped message from one world to another.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,8 +97,8 @@ pub struct Message<S> {
     pub src_cell: u32,
     /// Sequence number of this version of the (kind, step, src cell, dst world) content.
     pub seq: u32,
-    /// `(home cell at step, state)` pairs sorted by (cell, id); empty for anti-messages and
-    /// null messages. For an input: the states it adds.
+    /// The bodies with their home cells at `step`, sorted by (cell, id); empty for
+    /// anti-messages and null messages. For an input: the states it adds.
     pub bodies: Bodies<S>,
     /// For an input: the ids of the bodies it removes (empty otherwise).
     pub removes: Vec<BodyId>,
@@ -123,7 +160,13 @@ pub enum Input<S> {
 impl<S> Message<S> {
     /// The key of the total application order.
     pub fn key(&self) -> MessageKey {
-        (self.step, self.kind, self.src_cell, self.seq, self.sign)
+        MessageKey {
+            step: self.step,
+            kind: self.kind,
+            src_cell: self.src_cell,
+            seq: self.seq,
+            sign: self.sign,
+        }
     }
 
     /// The earliest step whose state this message may still change: a ghost of step `t`

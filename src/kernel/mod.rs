@@ -33,7 +33,7 @@ pub use config::{
     ScheduleSpec,
 };
 pub use counters::{BalanceCounters, Counters, WorldCounters};
-pub use message::{Edit, Input, Message, MessageKey, MessageKind, Sign};
+pub use message::{Edit, Homed, Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
 pub use trace::{RunTrace, WorldTrace};
 pub use world::World;

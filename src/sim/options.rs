@@ -22,12 +22,7 @@ impl ExecutorKind {
     /// Every executor, reference first.
     pub const ALL: [ExecutorKind; 3] = [Self::Reference, Self::Virtual, Self::Threaded];
 
-    /// Parses `reference`, `virtual` or `threaded`.
-    pub fn parse(s: &str) -> Option<Self> {
-        s.parse().ok()
-    }
-
-    /// The name [`parse`](Self::parse) accepts.
+    /// Its name (what [`FromStr`] reads): `reference`, `virtual` or `threaded`.
     pub fn name(self) -> &'static str {
         match self {
             Self::Reference => "reference",
@@ -71,6 +66,12 @@ pub struct RunOptions {
     pub kernel: KernelConfig,
     /// OS threads of the threaded executor (at least 1).
     pub threads: usize,
+    /// The threaded executor's laggard lead ([`ThreadedOptions::lead`]; 0 by default, and in
+    /// checkpoints written before it moved here).
+    ///
+    /// [`ThreadedOptions::lead`]: crate::exec::threaded::ThreadedOptions::lead
+    #[serde(default)]
+    pub lead: u64,
 }
 
 impl RunOptions {
@@ -85,6 +86,7 @@ impl RunOptions {
             executor: ExecutorKind::Virtual,
             kernel,
             threads: 1,
+            lead: 0,
         }
     }
 
@@ -94,6 +96,13 @@ impl RunOptions {
             executor: ExecutorKind::Threaded,
             kernel,
             threads,
+            lead: 0,
         }
+    }
+
+    /// The same options with the threaded executor's laggard lead `lead`.
+    pub fn lead(mut self, lead: u64) -> Self {
+        self.lead = lead;
+        self
     }
 }

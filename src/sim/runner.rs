@@ -257,6 +257,7 @@ impl<M: CellModel + 'static> Runner<M> {
                         keep_frames: false,
                     },
                     &ThreadedOptions::new(&options.kernel, options.threads.max(1), steps)
+                        .lead(options.lead)
                         .wanted(wanted),
                     &mut on_frame,
                 )?;

@@ -37,6 +37,8 @@ pub struct Playback {
     starved: AtomicU32,
     /// The step the display was waiting for at each starvation.
     starved_steps: Mutex<Vec<u64>>,
+    /// When the first and the latest frame were shown.
+    shown_span: Mutex<Option<(Instant, Instant)>>,
     /// Whether the run delivered its last frame.
     finished: AtomicBool,
     /// Whether the viewer is shutting down.
@@ -57,6 +59,7 @@ impl Playback {
             speed: AtomicU64::new(1.0f64.to_bits()),
             starved: AtomicU32::new(0),
             starved_steps: Mutex::new(Vec::new()),
+            shown_span: Mutex::new(None),
             finished: AtomicBool::new(false),
             closing: AtomicBool::new(false),
             shown: watch::channel(None).0,
@@ -91,6 +94,14 @@ impl Playback {
     /// the buffer empty while playing, after the buffer first filled).
     pub fn starved_steps(&self) -> Vec<u64> {
         self.starved_steps.lock().expect("starvations").clone()
+    }
+
+    /// Seconds from the first frame shown to the latest (0 before two frames).
+    pub fn showing_seconds(&self) -> f64 {
+        self.shown_span
+            .lock()
+            .expect("shown span")
+            .map_or(0.0, |(first, last)| (last - first).as_secs_f64())
     }
 
     /// Frames waiting to be shown.
@@ -198,6 +209,9 @@ impl Playback {
                     mut bytes,
                 }) => {
                     recent.push_back(now);
+                    let mut span = self.shown_span.lock().expect("shown span");
+                    *span = Some((span.map_or(now, |s| s.0), now));
+                    drop(span);
                     fill_display_fields(&mut bytes, fields(&recent, self.buffered()));
                     let shown = Arc::new(Shown { step, hash, bytes });
                     last_shown = Some(shown.clone());

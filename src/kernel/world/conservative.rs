@@ -2,6 +2,7 @@
 //! reads is known, and sends null messages so its neighbours know what it will not send
 //! (SPEC.md §K5).
 
+use super::index::{cells_around, OwnCell};
 use super::log::Out;
 use super::World;
 use crate::kernel::message::{Message, MessageKind};
@@ -9,6 +10,8 @@ use crate::model::{CellModel, Step};
 use std::sync::Arc;
 
 impl<M: CellModel> World<M> {
+    /// One conservative action: apply the whole inbox if it is not empty (making known what
+    /// it completes), else compute every own cell that can.
     pub(super) fn act_conservative(&mut self, gvt: Step, out: &mut Vec<Message<M::State>>) {
         let lvt_before = self.lvt();
         let drain = !self.inbox.is_empty();
@@ -32,20 +35,19 @@ impl<M: CellModel> World<M> {
                     if !msg.bodies.is_empty() {
                         let view = Arc::unwrap_or_clone(msg.bodies)
                             .into_iter()
-                            .map(|p| p.1)
+                            .map(|h| h.state)
                             .collect();
-                        let m = self.margin_index(src);
-                        self.slots[i].ghosts[m] = Some(Arc::new(view));
+                        let m = self.margin_cell(src);
+                        self.slots[i].ghosts[m.index()] = Some(Arc::new(view));
                     } else {
                         // An empty cell at `step` migrates nothing at `step + 1`.
                         self.ensure_slot(step + 1);
                         let j = self.si(step + 1);
                         self.slots[j].migrate_known.insert(src);
                         let grid = self.grid.clone();
-                        for n in grid.neighbours(grid.coord(src as usize)) {
-                            let ni = grid.index(n) as u32;
-                            if self.is_own(ni) {
-                                self.try_know(ni, step + 1, out);
+                        for n in cells_around(&grid, src) {
+                            if self.is_own(n) {
+                                self.try_know(n, step + 1, out);
                             }
                         }
                     }
@@ -53,14 +55,16 @@ impl<M: CellModel> World<M> {
                 MessageKind::Migrate => {
                     let slot = &mut self.slots[i];
                     slot.migrate_known.insert(src);
-                    for (d, b) in Arc::unwrap_or_clone(msg.bodies) {
-                        slot.foreign_in.entry((d, src)).or_default().push(b);
+                    for h in Arc::unwrap_or_clone(msg.bodies) {
+                        slot.foreign_in
+                            .entry((h.cell, src))
+                            .or_default()
+                            .push(h.state);
                     }
                     let grid = self.grid.clone();
-                    for n in grid.neighbours(grid.coord(src as usize)) {
-                        let ni = grid.index(n) as u32;
-                        if self.is_own(ni) {
-                            self.try_know(ni, step, out);
+                    for n in cells_around(&grid, src) {
+                        if self.is_own(n) {
+                            self.try_know(n, step, out);
                         }
                     }
                 }
@@ -70,7 +74,7 @@ impl<M: CellModel> World<M> {
             return;
         }
         let mut progressed = false;
-        for x in 0..self.cells.len() {
+        for x in OwnCell::all(self.cells.len()) {
             progressed |= self.try_compute(x, gvt, out);
         }
         self.next_min = self.next.iter().copied().min().unwrap_or(Step::MAX);
@@ -84,19 +88,22 @@ impl<M: CellModel> World<M> {
         }
     }
 
-    /// Whether the state of own cell `ni` (or the ghost of foreign cell `ni`) at `s` is known.
-    pub(super) fn known(&self, ni: u32, s: Step) -> bool {
+    /// Whether the state of global cell `cell` at `s` (own) or its ghost (foreign) is known.
+    pub(super) fn known(&self, cell: u32, s: Step) -> bool {
         let slot = &self.slots[self.si(s)];
-        if self.is_own(ni) {
-            slot.known[self.part.local(ni) as usize]
+        if self.is_own(cell) {
+            slot.known[self.own(cell)]
         } else {
-            slot.ghost_known.contains(&ni)
+            slot.ghost_known.contains(&cell)
         }
     }
 
+    /// Computes own cell `x` at its next step if the window allows and every state it reads
+    /// is known; then sends its migrations and makes known what it completes. Returns
+    /// whether it computed.
     pub(super) fn try_compute(
         &mut self,
-        x: usize,
+        x: OwnCell,
         gvt: Step,
         out: &mut Vec<Message<M::State>>,
     ) -> bool {
@@ -111,11 +118,7 @@ impl<M: CellModel> World<M> {
         let cell = self.cells[x];
         let occupied = !self.slots[i].state(x).is_empty();
         if occupied {
-            let c = self.grid.coord(cell as usize);
-            let ready = self
-                .grid
-                .neighbours(c)
-                .all(|n| self.known(self.grid.index(n) as u32, s));
+            let ready = cells_around(&self.grid, cell).all(|n| self.known(n, s));
             if !ready {
                 return false;
             }
@@ -137,10 +140,9 @@ impl<M: CellModel> World<M> {
             }
         }
         let grid = self.grid.clone();
-        for n in grid.neighbours(grid.coord(cell as usize)) {
-            let ni = grid.index(n) as u32;
-            if self.is_own(ni) {
-                self.try_know(ni, s + 1, out);
+        for n in cells_around(&grid, cell) {
+            if self.is_own(n) {
+                self.try_know(n, s + 1, out);
             }
         }
         true
@@ -153,17 +155,16 @@ impl<M: CellModel> World<M> {
             return;
         }
         self.ensure_slot(t);
-        let x = self.part.local(d) as usize;
+        let x = self.own(d);
         let (ip, i) = (self.si(t - 1), self.si(t));
         if self.slots[i].known[x] {
             return;
         }
-        let ready = self.grid.neighbours(self.grid.coord(d as usize)).all(|n| {
-            let ni = self.grid.index(n) as u32;
-            if self.is_own(ni) {
-                self.slots[ip].outs[self.part.local(ni) as usize].is_some()
+        let ready = cells_around(&self.grid, d).all(|n| {
+            if self.is_own(n) {
+                self.slots[ip].outs[self.own(n)].is_some()
             } else {
-                self.slots[i].migrate_known.contains(&ni)
+                self.slots[i].migrate_known.contains(&n)
             }
         });
         if !ready {

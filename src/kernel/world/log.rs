@@ -2,9 +2,10 @@
 //! views of the margin cells, the migrations in, the inputs, and the messages received and
 //! sent (SPEC.md §K3); reading committed steps and fossil collection.
 
+use super::index::{MarginCell, OwnCell, PerOwnCell};
 use super::World;
 use crate::frame::Event;
-use crate::kernel::message::{Bodies, Edit, MessageKind};
+use crate::kernel::message::{Bodies, Edit, Homed, MessageKind};
 use crate::kernel::partition::WorldId;
 use crate::model::{BodyId, CellModel, Step};
 use std::collections::{BTreeMap, BTreeSet};
@@ -29,17 +30,21 @@ pub(super) fn share<S>(v: Vec<S>) -> Shared<S> {
 /// (home cell, id), their home cells, and the events it raised.
 #[derive(Clone, Debug)]
 pub(super) struct Out<S, E> {
-    /// The cell computed.
+    /// The cell computed (global).
     pub(super) cell: u32,
+    /// The bodies it homes at the next step, sorted by (home cell, id).
     pub(super) bodies: Shared<S>,
-    /// The home cell of each of `bodies`; empty exactly when every body stays in `cell`.
+    /// The home cell (global) of each of `bodies`; empty exactly when every body stays in
+    /// `cell`.
     pub(super) homes: Vec<u32>,
+    /// The events the computation raised.
     pub(super) events: Vec<Event<E>>,
     /// Whether a cell computation produced it (an empty cell's output is not computed).
     pub(super) computed: bool,
 }
 
 impl<S, E> Out<S, E> {
+    /// The output of empty cell `cell`: nothing, not computed.
     pub(super) fn empty(cell: u32) -> Self {
         Out {
             cell,
@@ -50,6 +55,7 @@ impl<S, E> Out<S, E> {
         }
     }
 
+    /// Whether it homes no body and raised no event.
     pub(super) fn is_empty(&self) -> bool {
         self.bodies.is_none() && self.events.is_empty()
     }
@@ -79,8 +85,16 @@ impl<S, E> Out<S, E> {
     }
 }
 
-/// One received positive version: (sequence number, bodies, follows).
-pub(super) type Version<S> = (u32, Bodies<S>, bool);
+/// One received positive version of a message identity.
+#[derive(Debug)]
+pub(super) struct Version<S> {
+    /// Its sequence number: the highest live one is effective.
+    pub(super) seq: u32,
+    /// The bodies it carries.
+    pub(super) bodies: Bodies<S>,
+    /// Delta ghosts: its `follows` flag (a ghost of the next step is on its way).
+    pub(super) follows: bool,
+}
 
 /// What a world has received under one identity (kind, step, source cell).
 #[derive(Debug)]
@@ -103,14 +117,16 @@ impl<S> Default for Recv<S> {
 impl<S> Recv<S> {
     /// The effective version: the live positive with the highest sequence number.
     pub(super) fn effective(&self) -> Option<&Version<S>> {
-        self.positives.iter().max_by_key(|p| p.0)
+        self.positives.iter().max_by_key(|p| p.seq)
     }
 }
 
 /// The last version sent under one identity (kind, step, source cell, destination world).
 #[derive(Debug)]
 pub(super) struct Sent<S> {
+    /// The sequence number of the last version sent.
     pub(super) seq: u32,
+    /// The bodies of the live version (`None`: cancelled, or nothing sent).
     pub(super) live: Option<Bodies<S>>,
     /// The live version's `follows` flag.
     pub(super) follows: bool,
@@ -119,18 +135,29 @@ pub(super) struct Sent<S> {
 /// Everything a world holds about one step.
 #[derive(Debug)]
 pub(super) struct Slot<S, E> {
-    pub(super) states: Vec<Shared<S>>,
-    pub(super) outs: Vec<Option<Out<S, E>>>,
-    pub(super) known: Vec<bool>,
-    /// The view of each margin cell (indexed like `World::margin`) at this step (K4: the
+    /// The state of each own cell at this step.
+    pub(super) states: PerOwnCell<Shared<S>>,
+    /// The output of each own cell's computation at this step (`None`: not computed yet).
+    pub(super) outs: PerOwnCell<Option<Out<S, E>>>,
+    /// Conservative mode: whether each own cell's state at this step is known (final).
+    pub(super) known: PerOwnCell<bool>,
+    /// The view of each margin cell (indexed by [`MarginCell`]) at this step (K4: the
     /// effective ghost of the step, else — optimistic modes — the view of the step before;
     /// `None`: empty). Shared, not copied, between the steps that inherit it.
     pub(super) ghosts: Vec<Option<Arc<Vec<S>>>>,
+    /// Conservative mode: the foreign cells (global) whose ghost of this step has arrived.
     pub(super) ghost_known: BTreeSet<u32>,
+    /// The bodies migrating in at this step, by (own destination cell, foreign source
+    /// cell), both global.
     pub(super) foreign_in: BTreeMap<(u32, u32), Vec<S>>,
+    /// Conservative mode: the foreign cells (global) whose migrations into this step are
+    /// known (arrived, or known to be none).
     pub(super) migrate_known: BTreeSet<u32>,
+    /// What it received about this step, by (kind, source cell).
     pub(super) recv: BTreeMap<(MessageKind, u32), Recv<S>>,
+    /// What it sent about this step, by (kind, source cell, destination world).
     pub(super) sent: BTreeMap<(MessageKind, u32, WorldId), Sent<S>>,
+    /// The inputs at this step, by sequence number.
     pub(super) inputs: BTreeMap<u32, InputEntry<S>>,
 }
 
@@ -158,18 +185,23 @@ impl<S> InputEntry<S> {
 }
 
 impl<S: Clone, E: Clone> Slot<S, E> {
-    /// The state of own cell `x` (index in `World::cells`).
-    pub(super) fn state(&self, x: usize) -> &[S] {
+    /// The state of own cell `x`.
+    pub(super) fn state(&self, x: OwnCell) -> &[S] {
         view(&self.states[x])
     }
 
-    /// An empty slot for `n` own cells and `m` margin cells.
-    pub(super) fn new(n: usize, m: usize) -> Self {
+    /// The view of margin cell `m` (empty if none).
+    pub(super) fn ghost(&self, m: MarginCell) -> &[S] {
+        self.ghosts[m.index()].as_ref().map_or(&[][..], |v| &v[..])
+    }
+
+    /// An empty slot for `own` own cells and `margin` margin cells.
+    pub(super) fn new(own: usize, margin: usize) -> Self {
         Slot {
-            states: vec![None; n],
-            outs: (0..n).map(|_| None).collect(),
-            known: vec![false; n],
-            ghosts: vec![None; m],
+            states: vec![None; own].into(),
+            outs: (0..own).map(|_| None).collect(),
+            known: vec![false; own].into(),
+            ghosts: vec![None; margin],
             ghost_known: BTreeSet::new(),
             foreign_in: BTreeMap::new(),
             migrate_known: BTreeSet::new(),
@@ -183,7 +215,7 @@ impl<S: Clone, E: Clone> Slot<S, E> {
     /// `Arc`) is counted there only; inputs count their states and removed ids.
     pub(super) fn bytes(&self, prev: Option<&Slot<S, E>>) -> usize {
         let s = std::mem::size_of::<S>();
-        let p = std::mem::size_of::<(u32, S)>();
+        let p = std::mem::size_of::<Homed<S>>();
         let v = std::mem::size_of::<Vec<S>>();
         let h = std::mem::size_of::<Shared<S>>();
         let mut b = self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1);
@@ -216,7 +248,11 @@ impl<S: Clone, E: Clone> Slot<S, E> {
         let share = |l: &Bodies<S>| (v + l.len() * p) / Arc::strong_count(l);
         for r in self.recv.values() {
             b += 16 + r.antis.len() * 4;
-            b += r.positives.iter().map(|x| 8 + share(&x.1)).sum::<usize>();
+            b += r
+                .positives
+                .iter()
+                .map(|x| 8 + share(&x.bodies))
+                .sum::<usize>();
         }
         for x in self.sent.values() {
             b += 24 + x.live.as_ref().map_or(0, share);
@@ -250,10 +286,10 @@ impl<M: CellModel> World<M> {
         if !self.is_own(cell) {
             return None;
         }
-        self.slot(t)
-            .map(|s| s.state(self.part.local(cell) as usize))
+        self.slot(t).map(|s| s.state(self.own(cell)))
     }
 
+    /// Its slot of step `t`, if held.
     pub(super) fn slot(&self, t: Step) -> Option<&Slot<M::State, M::Event>> {
         t.checked_sub(self.base)
             .and_then(|i| self.slots.get(i as usize))
@@ -325,6 +361,7 @@ impl<M: CellModel> World<M> {
         }
     }
 
+    /// The position of step `t`'s slot in `World::slots` (`t` must be held or next).
     pub(super) fn si(&self, t: Step) -> usize {
         debug_assert!(t >= self.base, "step {t} below base {}", self.base);
         (t - self.base) as usize

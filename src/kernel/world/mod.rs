@@ -20,17 +20,19 @@
 //! only a different output changes states at `t + 1` (early cut-off) and re-sends migrations.
 
 mod conservative;
+mod index;
 mod log;
 mod receive;
 mod recompute;
 mod send;
 mod territory;
 
+use self::index::{OwnCell, PerOwnCell};
 use self::log::Slot;
 use self::territory::Nb;
 use super::config::{GhostPolicy, KernelConfig, PlantedBug, RollbackMode};
 use super::counters::WorldCounters;
-use super::message::{Message, MessageKey, MessageKind, Sign};
+use super::message::{Message, MessageKey, MessageKind};
 use super::partition::{Partition, WorldId};
 use super::trace::WorldTrace;
 use crate::grid::Grid;
@@ -52,47 +54,73 @@ pub enum ActionKind {
 
 /// One logical process (see the module doc).
 pub struct World<M: CellModel> {
+    /// Its id.
     id: WorldId,
+    /// The model every cell computation runs.
     model: Arc<M>,
+    /// The grid of the whole domain.
     grid: Arc<Grid>,
+    /// Who owns each cell of the grid.
     part: Arc<Partition>,
+    /// Its rollback mode (or conservative).
     mode: RollbackMode,
+    /// The window: it computes a step `s` only when `s + 1 < GVT + window`.
     window: Step,
+    /// The planted bug it runs with (verification only).
     bug: PlantedBug,
+    /// Full or delta ghosts (optimistic modes).
     ghosts: GhostPolicy,
-    cells: Vec<u32>,
-    /// The foreign cells next to an own cell (ascending): the cells whose ghosts it keeps.
+    /// The global index of each own cell (ascending).
+    cells: PerOwnCell<u32>,
+    /// The foreign cells next to an own cell (global indices, ascending; a [`MarginCell`]
+    /// indexes it): the cells whose ghosts it keeps.
+    ///
+    /// [`MarginCell`]: index::MarginCell
     margin: Vec<u32>,
     /// Per own cell, its 27-neighbourhood resolved once: where each neighbour's state is.
-    nbrs: Vec<[Nb; 27]>,
-    targets: Vec<Vec<WorldId>>,
+    nbrs: PerOwnCell<[Nb; 27]>,
+    /// Per own cell, the other worlds owning one of its neighbours (ascending): the worlds
+    /// its ghosts go to.
+    targets: PerOwnCell<Vec<WorldId>>,
     /// The other worlds owning a cell next to one of its own (ascending): the worlds it
     /// exchanges ghosts with.
     neighbours: Vec<WorldId>,
+    /// The first step its logs hold (one slot per step from here).
     base: Step,
+    /// Optimistic modes: its states exist up to this step.
     head: Step,
+    /// It computes states up to this step (see [`World::set_end`]).
     end: Step,
-    next: Vec<Step>,
+    /// Conservative mode: per own cell, the next step it computes.
+    next: PerOwnCell<Step>,
+    /// Conservative mode: the smallest of `next`.
     next_min: Step,
+    /// Conservative mode: the GVT at its last action that could compute nothing.
     idle_at: Option<Step>,
+    /// The log: one slot per step from `base`.
     slots: VecDeque<Slot<M::State, M::Event>>,
-    dirty: BTreeMap<Step, BTreeSet<u32>>,
+    /// Optimistic modes: the own cells to re-execute, per step.
+    dirty: BTreeMap<Step, BTreeSet<OwnCell>>,
+    /// Messages received and not applied yet, in the order they are applied.
     inbox: BTreeMap<MessageKey, Message<M::State>>,
+    /// What it has done so far (SPEC.md §K9).
     counters: WorldCounters,
     /// Calls of [`World::sample_log_bytes`] so far, and the most steps held at one of them
     /// (the log size is measured at every [`log::LOG_SAMPLE_EVERY`]-th call, and whenever the
     /// logs hold more steps than ever before).
     log_samples: u64,
     most_held: u64,
+    /// Scratch for `compute`: the bodies a cell's computation produced.
     scratch: Vec<M::State>,
     /// Scratch for `compute`: the home cell of each body it produced.
     homes_scratch: Vec<u32>,
+    /// Its part of the run trace, when recording.
     record: Option<WorldTrace>,
     /// The step the world started from (0, or its last reterritory): ghosts of this step
     /// carry the whole state; later ones only changes (K4, delta ghosts).
     origin: Step,
-    /// Ghosts to (re)evaluate at the end of the current action, as (step, own cell index).
-    ghost_due: BTreeSet<(Step, usize)>,
+    /// Ghosts to (re)evaluate at the end of the current action, as (step, own cell).
+    ghost_due: BTreeSet<(Step, OwnCell)>,
 }
 
 impl<M: CellModel> World<M> {
@@ -168,7 +196,7 @@ impl<M: CellModel> World<M> {
 
     /// The cells it owns (linear indices, ascending).
     pub fn cells(&self) -> &[u32] {
-        &self.cells
+        self.cells.as_slice()
     }
 
     /// The other worlds owning a cell next to one of its own (ascending): those it exchanges
@@ -199,7 +227,7 @@ impl<M: CellModel> World<M> {
     pub fn start(&mut self) -> Vec<Message<M::State>> {
         let mut out = Vec::new();
         let step = self.base;
-        for x in 0..self.cells.len() {
+        for x in OwnCell::all(self.cells.len()) {
             self.send_ghost(x, step, &mut out);
         }
         if let Some(r) = &mut self.record {
@@ -238,13 +266,13 @@ impl<M: CellModel> World<M> {
         // ghost of `s` affects `s + 1`, anything else of `s` affects `s`.
         let inbox = match self.inbox.keys().next() {
             None => Step::MAX,
-            Some(&(s, kind, ..)) => {
+            Some(&MessageKey { step: s, kind, .. }) => {
                 let non_ghost = kind == MessageKind::Input
                     || self
                         .inbox
-                        .range((s, MessageKind::Migrate, 0, 0, Sign::Anti)..)
+                        .range(MessageKey::first_of(s, MessageKind::Migrate)..)
                         .next()
-                        .is_some_and(|(k, _)| k.0 == s);
+                        .is_some_and(|(k, _)| k.step == s);
                 if non_ghost {
                     s
                 } else {

@@ -1,7 +1,8 @@
 //! Receiving (optimistic modes): applying the inbox in key order, annihilating
 //! anti-messages, and the effect of each message kind on the log (SPEC.md §K4).
 
-use super::log::view;
+use super::index::OwnCell;
+use super::log::{view, Version};
 use super::World;
 use crate::kernel::config::RollbackMode;
 use crate::kernel::message::{Bodies, Message, MessageKind, Sign};
@@ -38,7 +39,7 @@ impl<M: CellModel> World<M> {
                 r.rollback(self.id, s0, len, primary);
             }
             if self.mode == RollbackMode::World {
-                let all: BTreeSet<u32> = (0..self.cells.len() as u32).collect();
+                let all: BTreeSet<OwnCell> = OwnCell::all(self.cells.len()).collect();
                 for s in s0..self.head {
                     self.dirty.insert(s, all.clone());
                 }
@@ -59,10 +60,10 @@ impl<M: CellModel> World<M> {
         }
         let delta = self.delta();
         let r = self.slots[i].recv.entry((kind, src)).or_default();
-        let before = r.effective().map(|e| e.0);
+        let before = r.effective().map(|e| e.seq);
         // The cells the effective migration landed in (ghosts do not need them).
         let old_cells: Vec<u32> = match r.effective() {
-            Some(e) if kind == MessageKind::Migrate => e.1.iter().map(|p| p.0).collect(),
+            Some(e) if kind == MessageKind::Migrate => e.bodies.iter().map(|h| h.cell).collect(),
             _ => Vec::new(),
         };
         match msg.sign {
@@ -71,11 +72,15 @@ impl<M: CellModel> World<M> {
                     r.antis.swap_remove(k);
                     self.counters.annihilated += 1;
                 } else {
-                    r.positives.push((msg.seq, msg.bodies, msg.follows));
+                    r.positives.push(Version {
+                        seq: msg.seq,
+                        bodies: msg.bodies,
+                        follows: msg.follows,
+                    });
                 }
             }
             Sign::Anti => {
-                if let Some(k) = r.positives.iter().position(|p| p.0 == msg.seq) {
+                if let Some(k) = r.positives.iter().position(|p| p.seq == msg.seq) {
                     r.positives.swap_remove(k);
                     self.counters.annihilated += 1;
                 } else {
@@ -83,7 +88,7 @@ impl<M: CellModel> World<M> {
                 }
             }
         }
-        let after = r.effective().map(|e| e.0);
+        let after = r.effective().map(|e| e.seq);
         if before == after {
             return None;
         }
@@ -91,14 +96,14 @@ impl<M: CellModel> World<M> {
             // The view of `src` at `step`: the effective ghost, else the view of the step
             // before (K4, delta ghosts).
             let (view, follows) = match r.effective() {
-                Some(e) if e.1.is_empty() => (None, e.2),
+                Some(e) if e.bodies.is_empty() => (None, e.follows),
                 Some(e) => (
-                    Some(Arc::new(e.1.iter().map(|p| p.1.clone()).collect())),
-                    e.2,
+                    Some(Arc::new(e.bodies.iter().map(|h| h.state.clone()).collect())),
+                    e.follows,
                 ),
                 None if i > 0 && delta => {
-                    let m = self.margin_index(src);
-                    (self.slots[i - 1].ghosts[m].clone(), false)
+                    let m = self.margin_cell(src);
+                    (self.slots[i - 1].ghosts[m.index()].clone(), false)
                 }
                 None => {
                     // Empty is the view before the origin; a delta ghost's step is always
@@ -113,13 +118,13 @@ impl<M: CellModel> World<M> {
             }
             return dirtied;
         }
-        let new: Bodies<M::State> = r.effective().map(|e| e.1.clone()).unwrap_or_default();
+        let new: Bodies<M::State> = r.effective().map(|e| e.bodies.clone()).unwrap_or_default();
         match kind {
             MessageKind::Input => unreachable!("inputs are applied by apply_input"),
             MessageKind::Ghost => unreachable!("ghosts are applied above"),
             MessageKind::Migrate => {
                 let mut dsts: Vec<u32> = old_cells;
-                dsts.extend(new.iter().map(|p| p.0));
+                dsts.extend(new.iter().map(|h| h.cell));
                 dsts.sort_unstable();
                 dsts.dedup();
                 for &d in &dsts {
@@ -129,8 +134,8 @@ impl<M: CellModel> World<M> {
                     );
                     let bodies: Vec<M::State> = new
                         .iter()
-                        .filter(|p| p.0 == d)
-                        .map(|p| p.1.clone())
+                        .filter(|h| h.cell == d)
+                        .map(|h| h.state.clone())
                         .collect();
                     let slot = &mut self.slots[i];
                     if bodies.is_empty() {
@@ -169,10 +174,10 @@ impl<M: CellModel> World<M> {
         follows: bool,
     ) -> Option<Step> {
         let carry = self.delta() && !follows;
-        let m = self.margin_index(src);
+        let m = self.margin_cell(src);
         let mut first = None;
         let mut u = t;
-        while let Some(slot) = self.slots.get_mut((u - self.base) as usize) {
+        while let Some(slot) = self.slots.get_mut(self.si(u)) {
             // Later steps take the view only if they inherit it: no ghost of their own.
             let own_ghost = || {
                 slot.recv
@@ -182,7 +187,7 @@ impl<M: CellModel> World<M> {
             if u > t && (!carry || own_ghost()) {
                 break;
             }
-            let old = std::mem::replace(&mut slot.ghosts[m], view.clone());
+            let old = std::mem::replace(&mut slot.ghosts[m.index()], view.clone());
             let unchanged = match (&old, &view) {
                 (None, None) => true,
                 (Some(a), Some(b)) => Arc::ptr_eq(a, b) || Self::same_states(a, b),
@@ -212,14 +217,14 @@ impl<M: CellModel> World<M> {
         let mut cells: BTreeSet<u32> = msg
             .bodies
             .iter()
-            .map(|p| p.0)
+            .map(|h| h.cell)
             .filter(|&c| self.is_own(c))
             .collect();
         if step <= self.head {
-            for (x, st) in self.slots[i].states.iter().enumerate() {
+            for (x, st) in self.slots[i].states.enumerate() {
                 let touched = |b: &M::State| {
                     let id = M::id(b);
-                    msg.removes.contains(&id) || msg.edits.iter().any(|e| e.0 == id)
+                    msg.removes.contains(&id) || msg.edits.iter().any(|(edited, _)| *edited == id)
                 };
                 if view(st).iter().any(touched) {
                     cells.insert(self.cells[x]);

@@ -2,12 +2,13 @@
 //! from outputs and migrations, marking the cells that read a changed state dirty, and
 //! Rollback-and-Propagate's re-execution with early cut-off (SPEC.md §K4, §K5).
 
+use super::index::{cells_around, OwnCell, PerOwnCell};
 use super::log::{share, view, Out, Shared};
 use super::territory::Nb;
 use super::World;
 use crate::frame::{Event, LeftGrid};
 use crate::kernel::config::{PlantedBug, RollbackMode};
-use crate::kernel::message::Message;
+use crate::kernel::message::{Homed, Message};
 use crate::kernel::partition::WorldId;
 use crate::model::{BodyId, CellModel, Neighbourhood, Step};
 use std::collections::BTreeSet;
@@ -49,16 +50,16 @@ fn changed_entities<'a, M: CellModel>(
 
 impl<M: CellModel> World<M> {
     /// Computes own cell `x` at step `s` from the states and ghosts held for `s`.
-    pub(super) fn compute(&mut self, x: usize, s: Step) -> Out<M::State, M::Event> {
+    pub(super) fn compute(&mut self, x: OwnCell, s: Step) -> Out<M::State, M::Event> {
         let cell = self.cells[x];
         let grid = &*self.grid;
-        let slot = &self.slots[(s - self.base) as usize];
+        let slot = &self.slots[self.si(s)];
         let c = grid.coord(cell as usize);
         let nbrs = &self.nbrs[x];
         let cells: [&[M::State]; 27] = std::array::from_fn(|k| match nbrs[k] {
             Nb::Outside => &[][..],
-            Nb::Own(l) => slot.state(l as usize),
-            Nb::Margin(m) => slot.ghosts[m as usize].as_ref().map_or(&[][..], |v| &v[..]),
+            Nb::Own(n) => slot.state(n),
+            Nb::Margin(m) => slot.ghost(m),
         });
         let nb = Neighbourhood { centre: c, cells };
         let mut events = Vec::new();
@@ -141,11 +142,13 @@ impl<M: CellModel> World<M> {
             && x.iter().zip(y).all(|(p, q)| self.same_entity(p, q))
     }
 
-    pub(super) fn same_pairs(&self, a: &[(u32, M::State)], b: &[(u32, M::State)]) -> bool {
+    /// Whether two messages' bodies are the same: the same home cells and, by
+    /// [`World::same_entity`], the same states.
+    pub(super) fn same_bodies(&self, a: &[Homed<M::State>], b: &[Homed<M::State>]) -> bool {
         a.len() == b.len()
             && a.iter()
                 .zip(b)
-                .all(|(x, y)| x.0 == y.0 && self.same_entity(&x.1, &y.1))
+                .all(|(x, y)| x.cell == y.cell && self.same_entity(&x.state, &y.state))
     }
 
     /// Bit equality of two entity states — or, under the planted bug
@@ -167,14 +170,12 @@ impl<M: CellModel> World<M> {
     /// changed.
     pub(super) fn rebuild_state(&mut self, d: u32, t: Step) -> Option<Shared<M::State>> {
         let grid = &*self.grid;
-        let part = &*self.part;
-        let prev = &self.slots[(t - 1 - self.base) as usize];
-        let cur = &self.slots[(t - self.base) as usize];
+        let i = self.si(t);
+        let (prev, cur) = (&self.slots[i - 1], &self.slots[i]);
         let mut v: Vec<M::State> = Vec::new();
-        for n in grid.neighbours(grid.coord(d as usize)) {
-            let ni = grid.index(n) as u32;
-            if part.owner(ni) == self.id {
-                if let Some(o) = &prev.outs[part.local(ni) as usize] {
+        for n in cells_around(grid, d) {
+            if self.is_own(n) {
+                if let Some(o) = &prev.outs[self.own(n)] {
                     v.extend(o.landing_in(d).iter().cloned());
                 }
             }
@@ -204,16 +205,21 @@ impl<M: CellModel> World<M> {
                 .collect();
             v.retain(|b| !removed.contains(&M::id(b)));
             for input in cur.inputs.values() {
-                v.extend(input.adds.iter().filter(|p| p.0 == d).map(|p| p.1.clone()));
+                v.extend(
+                    input
+                        .adds
+                        .iter()
+                        .filter(|h| h.cell == d)
+                        .map(|h| h.state.clone()),
+                );
             }
         }
         v.sort_by_key(|b| M::id(b));
-        let ld = part.local(d) as usize;
-        let i = (t - self.base) as usize;
-        if Self::same_states(&v, self.slots[i].state(ld)) {
+        let x = self.own(d);
+        if Self::same_states(&v, self.slots[i].state(x)) {
             return None;
         }
-        Some(std::mem::replace(&mut self.slots[i].states[ld], share(v)))
+        Some(std::mem::replace(&mut self.slots[i].states[x], share(v)))
     }
 
     /// The own cells around `cell` whose computation at `s` must be redone because the state
@@ -228,7 +234,7 @@ impl<M: CellModel> World<M> {
         s: Step,
         old: &[M::State],
         new: &[M::State],
-    ) -> Vec<u32> {
+    ) -> Vec<OwnCell> {
         let i = self.si(s);
         let slot = &self.slots[i];
         let filter = self.mode == RollbackMode::Cell;
@@ -238,15 +244,14 @@ impl<M: CellModel> World<M> {
             Vec::new()
         };
         let mut reading = Vec::new();
-        for n in self.grid.neighbours(self.grid.coord(cell as usize)) {
-            let ni = self.grid.index(n) as u32;
-            if !self.is_own(ni) {
+        for n in cells_around(&self.grid, cell) {
+            if !self.is_own(n) {
                 continue;
             }
-            let x = self.part.local(ni) as usize;
+            let x = self.own(n);
             let state = slot.state(x);
             let produced = slot.outs[x].as_ref().is_some_and(|o| !o.is_empty());
-            let reads = if !filter || ni == cell {
+            let reads = if !filter || n == cell {
                 !state.is_empty() || produced
             } else {
                 (state.is_empty() && produced)
@@ -255,14 +260,14 @@ impl<M: CellModel> World<M> {
                         .any(|r| changed.iter().any(|c| self.model.may_affect(r, c)))
             };
             if reads {
-                reading.push(x as u32);
+                reading.push(x);
             }
         }
         reading
     }
 
     /// Marks the own `cells` dirty at step `s < head`. Returns whether there were any.
-    pub(super) fn mark_dirty(&mut self, s: Step, cells: Vec<u32>) -> bool {
+    pub(super) fn mark_dirty(&mut self, s: Step, cells: Vec<OwnCell>) -> bool {
         if cells.is_empty() {
             return false;
         }
@@ -274,7 +279,7 @@ impl<M: CellModel> World<M> {
     /// step `t` was computed, dirty the cells reading it. Returns whether something became
     /// dirty.
     pub(super) fn on_state_change(&mut self, d: u32, t: Step, old: Shared<M::State>) -> bool {
-        let x = self.part.local(d) as usize;
+        let x = self.own(d);
         self.ghost_due.insert((t, x));
         if self.delta() {
             // The ghosts of `t + 1` and `t + 2` depend on whether the state changed at `t`
@@ -298,9 +303,8 @@ impl<M: CellModel> World<M> {
         self.counters.steps_reexecuted += 1;
         let i = self.si(s);
         let mut changed_dst: BTreeSet<u32> = BTreeSet::new();
-        let mut changed_mig: BTreeSet<(usize, WorldId)> = BTreeSet::new();
+        let mut changed_mig: BTreeSet<(OwnCell, WorldId)> = BTreeSet::new();
         for x in cells {
-            let x = x as usize;
             let new = if self.slots[i].state(x).is_empty() {
                 Out::empty(self.cells[x])
             } else {
@@ -348,16 +352,16 @@ impl<M: CellModel> World<M> {
         let i = self.si(h);
         let n = self.cells.len();
         // How many own cells' outputs land in each own cell (each output counted once).
-        let mut landings = vec![0u32; n];
-        let mut migs: BTreeSet<(usize, WorldId)> = BTreeSet::new();
-        for x in 0..n {
+        let mut landings: PerOwnCell<u32> = vec![0; n].into();
+        let mut migs: BTreeSet<(OwnCell, WorldId)> = BTreeSet::new();
+        for x in OwnCell::all(n) {
             let o = if self.slots[i].state(x).is_empty() {
                 Out::empty(self.cells[x])
             } else {
                 self.compute(x, h)
             };
             if o.stays() {
-                landings[x] += o.bodies.is_some() as u32;
+                landings[x] += u32::from(o.bodies.is_some());
             } else {
                 let mut last = None;
                 for &d in &o.homes {
@@ -366,7 +370,7 @@ impl<M: CellModel> World<M> {
                     }
                     last = Some(d);
                     if self.is_own(d) {
-                        landings[self.part.local(d) as usize] += 1;
+                        landings[self.own(d)] += 1;
                     } else {
                         migs.insert((x, self.part.owner(d)));
                     }
@@ -388,14 +392,14 @@ impl<M: CellModel> World<M> {
             .chain(
                 next.inputs
                     .values()
-                    .flat_map(|x| x.adds.iter().map(|p| p.0))
+                    .flat_map(|x| x.adds.iter().map(|h| h.cell))
                     .filter(|&c| part.owner(c) == id),
             )
             .collect();
         // Inputs at h + 1 (rare) may remove ids from any cell: every cell takes the general
         // rule then.
         let inputs = !next.inputs.is_empty();
-        for (x, &k) in landings.iter().enumerate() {
+        for (x, &k) in landings.enumerate() {
             if k == 0 {
                 continue;
             }
@@ -420,7 +424,7 @@ impl<M: CellModel> World<M> {
         for (x, w) in migs {
             self.send_migrate(x, h, w, out);
         }
-        for x in 0..n {
+        for x in OwnCell::all(n) {
             if !self.targets[x].is_empty() {
                 self.send_ghost(x, h + 1, out);
             }

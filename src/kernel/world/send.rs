@@ -1,10 +1,11 @@
 //! Sending: ghosts of border cells and migrations, lazily (an anti-message and a new version
 //! only when the content changed; SPEC.md §K4, "Lazy cancellation").
 
+use super::index::OwnCell;
 use super::log::Sent;
 use super::World;
 use crate::kernel::config::{PlantedBug, RollbackMode};
-use crate::kernel::message::{Bodies, Message, MessageKind, Sign};
+use crate::kernel::message::{Bodies, Homed, Message, MessageKind, Sign};
 use crate::kernel::partition::WorldId;
 use crate::model::{CellModel, Step};
 use std::sync::Arc;
@@ -30,7 +31,7 @@ impl<M: CellModel> World<M> {
         if !conservative {
             let same = match (live, &content) {
                 (None, None) => true,
-                (Some(a), Some(b)) => live_follows == follows && self.same_pairs(a, b),
+                (Some(a), Some(b)) => live_follows == follows && self.same_bodies(a, b),
                 _ => false,
             };
             if same {
@@ -85,7 +86,7 @@ impl<M: CellModel> World<M> {
 
     /// Whether the state of own cell `x` at `u` differs from its state at `u − 1` (at the
     /// origin step: whether it is not empty).
-    pub(super) fn changed(&self, x: usize, u: Step) -> bool {
+    pub(super) fn changed(&self, x: OwnCell, u: Step) -> bool {
         let i = self.si(u);
         let cur = self.slots[i].state(x);
         if u == self.origin {
@@ -105,7 +106,7 @@ impl<M: CellModel> World<M> {
     /// `t − 1` (so a change is always followed by the next step's ghost, which its `follows`
     /// flag announces), else no ghost. Lazily: a re-evaluation that changes nothing sends
     /// nothing.
-    pub(super) fn send_ghost(&mut self, x: usize, t: Step, out: &mut Vec<Message<M::State>>) {
+    pub(super) fn send_ghost(&mut self, x: OwnCell, t: Step, out: &mut Vec<Message<M::State>>) {
         if self.targets[x].is_empty() {
             return;
         }
@@ -119,8 +120,16 @@ impl<M: CellModel> World<M> {
             (now || (t > self.origin && self.changed(x, t - 1)), now)
         };
         let cur = self.slots[self.si(t)].state(x);
-        let content: Option<Bodies<M::State>> =
-            send.then(|| Arc::new(cur.iter().map(|b| (cell, b.clone())).collect()));
+        let content: Option<Bodies<M::State>> = send.then(|| {
+            Arc::new(
+                cur.iter()
+                    .map(|b| Homed {
+                        cell,
+                        state: b.clone(),
+                    })
+                    .collect(),
+            )
+        });
         for k in 0..self.targets[x].len() {
             let w = self.targets[x][k];
             self.send(
@@ -135,19 +144,22 @@ impl<M: CellModel> World<M> {
     /// (Re)sends the bodies the computation of own cell `x` at `s` homes in world `w`'s cells.
     pub(super) fn send_migrate(
         &mut self,
-        x: usize,
+        x: OwnCell,
         s: Step,
         w: WorldId,
         out: &mut Vec<Message<M::State>>,
     ) {
         let i = self.si(s);
         let part = &*self.part;
-        let content: Vec<(u32, M::State)> = self.slots[i].outs[x]
+        let content: Vec<Homed<M::State>> = self.slots[i].outs[x]
             .as_ref()
             .map(|o| {
                 o.pairs()
                     .filter(|(d, _)| part.owner(*d) == w)
-                    .map(|(d, b)| (d, b.clone()))
+                    .map(|(d, b)| Homed {
+                        cell: d,
+                        state: b.clone(),
+                    })
                     .collect()
             })
             .unwrap_or_default();

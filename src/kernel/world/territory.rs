@@ -1,6 +1,7 @@
 //! A world's territory: its own cells, the foreign cells next to them (its margin), each own
 //! cell's neighbourhood resolved once, and the worlds it exchanges ghosts with (SPEC.md §K2).
 
+use super::index::{cells_around, MarginCell, OwnCell, PerOwnCell};
 use super::log::{share, Slot};
 use super::World;
 use crate::grid::Grid;
@@ -17,10 +18,10 @@ use std::sync::Arc;
 pub(super) enum Nb {
     /// Outside the grid: always empty.
     Outside,
-    /// An own cell (its local index).
-    Own(u32),
-    /// A margin cell (its index in `World::margin`).
-    Margin(u32),
+    /// An own cell.
+    Own(OwnCell),
+    /// A margin cell.
+    Margin(MarginCell),
 }
 
 impl<M: CellModel> World<M> {
@@ -35,13 +36,12 @@ impl<M: CellModel> World<M> {
         states: &CellStates<M::State>,
         step: Step,
     ) -> Self {
-        let cells = part.cells_of(id).to_vec();
-        let targets: Vec<Vec<WorldId>> = cells
+        let cells: PerOwnCell<u32> = part.cells_of(id).iter().copied().collect();
+        let targets: PerOwnCell<Vec<WorldId>> = cells
             .iter()
             .map(|&c| {
-                let mut t: Vec<WorldId> = grid
-                    .neighbours(grid.coord(c as usize))
-                    .map(|n| part.owner_of(&grid, n))
+                let mut t: Vec<WorldId> = cells_around(&grid, c)
+                    .map(|n| part.owner(n))
                     .filter(|&w| w != id)
                     .collect();
                 t.sort_unstable();
@@ -54,13 +54,12 @@ impl<M: CellModel> World<M> {
         neighbours.dedup();
         let mut margin: Vec<u32> = cells
             .iter()
-            .flat_map(|&c| grid.neighbours(grid.coord(c as usize)))
-            .map(|n| grid.index(n) as u32)
+            .flat_map(|&c| cells_around(&grid, c))
             .filter(|&n| part.owner(n) != id)
             .collect();
         margin.sort_unstable();
         margin.dedup();
-        let nbrs: Vec<[Nb; 27]> = cells
+        let nbrs: PerOwnCell<[Nb; 27]> = cells
             .iter()
             .map(|&cell| {
                 let c = grid.coord(cell as usize);
@@ -71,15 +70,17 @@ impl<M: CellModel> World<M> {
                     }
                     let ni = grid.index(n) as u32;
                     if part.owner(ni) == id {
-                        Nb::Own(part.local(ni))
+                        Nb::Own(OwnCell::from_local(part.local(ni)))
                     } else {
-                        Nb::Margin(margin.binary_search(&ni).expect("a neighbour") as u32)
+                        Nb::Margin(MarginCell::at(
+                            margin.binary_search(&ni).expect("a neighbour"),
+                        ))
                     }
                 })
             })
             .collect();
         let mut slot = Slot::new(cells.len(), margin.len());
-        for (x, &c) in cells.iter().enumerate() {
+        for (x, &c) in cells.enumerate() {
             slot.states[x] = share(states.cell_at(c as usize).to_vec());
             slot.known[x] = true;
         }
@@ -101,7 +102,7 @@ impl<M: CellModel> World<M> {
             base: step,
             head: step,
             end: step,
-            next: vec![step; n],
+            next: vec![step; n].into(),
             next_min: if n == 0 { Step::MAX } else { step },
             idle_at: None,
             slots: VecDeque::from([slot]),
@@ -118,15 +119,24 @@ impl<M: CellModel> World<M> {
         }
     }
 
+    /// Whether it owns global cell `cell`.
     pub(super) fn is_own(&self, cell: u32) -> bool {
         self.part.owner(cell) == self.id
     }
 
-    /// The index in `margin` of foreign cell `cell`, which must be next to an own cell (a
-    /// ghost comes only from such a cell: its sender targets the owners of its neighbours).
-    pub(super) fn margin_index(&self, cell: u32) -> usize {
-        self.margin
+    /// Global cell `cell`, which it owns, as an own cell.
+    pub(super) fn own(&self, cell: u32) -> OwnCell {
+        debug_assert!(self.is_own(cell), "cell {cell} is not world {}'s", self.id);
+        OwnCell::from_local(self.part.local(cell))
+    }
+
+    /// Foreign global cell `cell` as a margin cell; it must be next to an own cell (a ghost
+    /// comes only from such a cell: its sender targets the owners of its neighbours).
+    pub(super) fn margin_cell(&self, cell: u32) -> MarginCell {
+        let position = self
+            .margin
             .binary_search(&cell)
-            .unwrap_or_else(|_| panic!("cell {cell} is not next to world {}", self.id))
+            .unwrap_or_else(|_| panic!("cell {cell} is not next to world {}", self.id));
+        MarginCell::at(position)
     }
 }

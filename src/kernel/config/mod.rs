@@ -1,6 +1,12 @@
 //! The configuration of a Time Warp run: number of worlds, rollback mode, optimism window,
 //! partitioner and the virtual executor's schedule.
 
+mod balance;
+mod names;
+
+pub use balance::{BalanceConfig, BalanceConfigError, LoadSource, MAX_BACKOFF};
+pub use names::{UnknownGhostPolicy, UnknownMode, UnknownPartition};
+
 use serde::{Deserialize, Serialize};
 
 /// How a world repairs a straggler (SPEC.md §Rollback modes).
@@ -34,27 +40,6 @@ pub enum GhostPolicy {
     Full,
 }
 
-impl RollbackMode {
-    /// Parses `cell`, `world` or `conservative`.
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "cell" => Some(Self::Cell),
-            "world" => Some(Self::World),
-            "conservative" => Some(Self::Conservative),
-            _ => None,
-        }
-    }
-
-    /// The name `parse` accepts.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Cell => "cell",
-            Self::World => "world",
-            Self::Conservative => "conservative",
-        }
-    }
-}
-
 /// How cells are assigned to worlds (see [`crate::kernel::partition`]).
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -71,28 +56,6 @@ pub enum PartitionKind {
     Random,
     /// An explicit owner per cell (linear cell index order).
     Explicit(Vec<u32>),
-}
-
-impl PartitionKind {
-    /// Parses `blocks`, `kmeans` or `random`.
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "blocks" => Some(Self::Blocks),
-            "kmeans" => Some(Self::KMeans),
-            "random" => Some(Self::Random),
-            _ => None,
-        }
-    }
-
-    /// The name [`parse`](Self::parse) accepts (`explicit` for an explicit owner list).
-    pub fn name(&self) -> &'static str {
-        match self {
-            Self::Blocks => "blocks",
-            Self::KMeans => "kmeans",
-            Self::Random => "random",
-            Self::Explicit(_) => "explicit",
-        }
-    }
 }
 
 /// Who decides, in the virtual executor, which world acts next and which in-flight message
@@ -160,17 +123,15 @@ pub struct KernelConfig {
     /// Dynamic load balancing (off by default).
     #[serde(default)]
     pub balance: BalanceConfig,
-    /// Threaded executor, optimistic modes: how many steps a world may compute ahead of the
-    /// slowest of its neighbour worlds before it lets laggards run first (SPEC.md §10). 0 runs the
-    /// worlds nearly in lockstep (few rollbacks); more lets a world speculate past a slower
-    /// neighbour, up to the window.
-    #[serde(default)]
-    pub lead: u64,
     /// Ghost policy of the optimistic modes.
     #[serde(default)]
     pub ghosts: GhostPolicy,
-    /// A deliberate bug, for tests that prove the checks can fire.
+    /// A deliberate bug, for tests and `soda verify --planted-bug` that prove the checks can
+    /// fire. A verification hook, not part of a run's description: it is never serialised
+    /// (checkpoints do not hold it, a resumed run has none) and reads back as
+    /// [`PlantedBug::None`].
     #[doc(hidden)]
+    #[serde(skip)]
     pub planted_bug: PlantedBug,
 }
 
@@ -186,7 +147,6 @@ impl Default for KernelConfig {
             record_schedule: true,
             trace: false,
             balance: BalanceConfig::default(),
-            lead: 0,
             ghosts: GhostPolicy::Delta,
             planted_bug: PlantedBug::None,
         }
@@ -250,12 +210,6 @@ impl KernelConfig {
         self
     }
 
-    /// Sets the threaded executor's laggard lead (see [`KernelConfig::lead`]).
-    pub fn lead(mut self, lead: u64) -> Self {
-        self.lead = lead;
-        self
-    }
-
     /// Turns decision recording on or off.
     pub fn record_schedule(mut self, on: bool) -> Self {
         self.record_schedule = on;
@@ -263,129 +217,26 @@ impl KernelConfig {
     }
 }
 
-/// Where a balancing round reads each world's load (SPEC.md §K13). Whatever the
-/// source, balancing only moves cells at a step every world has committed, so the committed
-/// bits never depend on it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum LoadSource {
-    /// Busy wall-clock time per committed step (threaded executor; the virtual executor,
-    /// which must replay exactly, uses [`LoadSource::CellsComputed`] instead).
-    #[default]
-    Measured,
-    /// Cell computations per committed step (rollbacks included): a deterministic cost
-    /// proxy, so decisions replay from the schedule.
-    CellsComputed,
-    /// Random loads from ChaCha8 seeded with this value and the round number: random but
-    /// replayable decisions, for tests that force cessions and famine.
-    Seeded(u64),
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-/// The longest interval between balancing rounds with [`BalanceConfig::backoff`], in periods.
-pub const MAX_BACKOFF: u64 = 4;
-
-/// Dynamic load balancing by cell cession (thesis §3.3; SPEC.md §K13).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct BalanceConfig {
-    /// Balancing on or off (`--balance on|off`).
-    pub enabled: bool,
-    /// Steps between balancing rounds (each round happens at a committed step).
-    pub period: u64,
-    /// Back off when balanced (`--balance-backoff`): after a round that moves no cell the
-    /// next round comes twice as many steps later (at most [`MAX_BACKOFF`] periods); a round
-    /// that moves cells brings the interval back to `period`. Each round is a barrier for
-    /// the threaded executor, so rounds that find nothing to do are not free.
-    pub backoff: bool,
-    /// An opening round at step 0 (`--balance-opening`), before anything is computed, with
-    /// each world's load estimated from its bodies (SPEC.md §K13): a skewed scene starts
-    /// balanced instead of waiting a period for the first measurement.
-    pub opening: bool,
-    /// A world whose smoothed load is below this fraction of the mean is underloaded.
-    pub underloaded: f64,
-    /// Above this multiple of the mean a world is highly loaded (it gives cells to
-    /// underloaded neighbours).
-    pub high: f64,
-    /// Above this multiple of the mean a world is overloaded (it gives cells to any less
-    /// loaded neighbour on its own initiative).
-    pub overloaded: f64,
-    /// Weight of the newest measurement in the exponential smoothing of loads, in (0, 1].
-    /// Smoothing spans rounds that move no cell: after a round that moved cells, the next
-    /// round takes its measurement of the new map as it is (SPEC.md §K13).
-    pub smoothing: f64,
-    /// Rounds during which a cell that moved cannot move again (hysteresis).
-    pub cooldown: u64,
-    /// Most cells one world gives one neighbour in one round.
-    pub max_cells: usize,
-    /// Where loads come from.
-    pub load: LoadSource,
-    /// Seed of the tie-breaks between equal candidates.
-    pub seed: u64,
-    /// How many workers the load is shared between (SPEC.md §K13): the load levels are
-    /// taken against `total / workers` instead of the mean over the worlds, so with fewer
-    /// workers than worlds the load gathers in as many territories as there are workers
-    /// (fewer borders) and the other worlds may stay idle (no famine then). 0: the
-    /// executor's own — the thread count for the threaded executor, the world count (the
-    /// thesis's mean) for the virtual one.
-    #[serde(default)]
-    pub workers: usize,
-}
-
-impl Default for BalanceConfig {
-    fn default() -> Self {
-        BalanceConfig {
-            enabled: false,
-            period: 20,
-            backoff: true,
-            opening: true,
-            underloaded: 0.8,
-            high: 1.05,
-            overloaded: 1.5,
-            smoothing: 0.5,
-            cooldown: 2,
-            max_cells: 512,
-            load: LoadSource::Measured,
-            seed: 0,
-            workers: 0,
-        }
-    }
-}
-
-impl BalanceConfig {
-    /// Balancing on with the default thresholds.
-    pub fn on() -> Self {
-        BalanceConfig {
-            enabled: true,
-            ..Self::default()
-        }
-    }
-
-    /// Checks the thresholds: `0 < underloaded ≤ 1 ≤ high ≤ overloaded`,
-    /// `0 < smoothing ≤ 1`, `period ≥ 1`, `max_cells ≥ 1`. The error names the field.
-    pub fn validate(&self) -> Result<(), String> {
-        let ok = self.underloaded > 0.0
-            && self.underloaded <= 1.0
-            && self.high >= 1.0
-            && self.overloaded >= self.high;
-        if !ok {
-            return Err(format!(
-                "balance thresholds must satisfy 0 < underloaded <= 1 <= high <= overloaded \
-                 (got underloaded {}, high {}, overloaded {})",
-                self.underloaded, self.high, self.overloaded
-            ));
-        }
-        if !(self.smoothing > 0.0 && self.smoothing <= 1.0) {
-            return Err(format!(
-                "balance smoothing must be in (0, 1] (got {})",
-                self.smoothing
-            ));
-        }
-        if self.period == 0 {
-            return Err("balance period must be at least 1 step".into());
-        }
-        if self.max_cells == 0 {
-            return Err("balance max_cells must be at least 1".into());
-        }
-        Ok(())
+    #[test]
+    fn a_planted_bug_is_not_serialised_and_old_documents_still_read() {
+        // (Older documents also carry `lead`, now an executor setting: ignored too.)
+        let config = KernelConfig {
+            planted_bug: PlantedBug::DropLoneAnti,
+            ..KernelConfig::new(3)
+        };
+        let json = serde_json::to_string(&config).unwrap();
+        assert!(!json.contains("planted_bug"), "{json}");
+        let back: KernelConfig = serde_json::from_str(&json).unwrap();
+        assert_eq!(back, KernelConfig::new(3));
+        // Checkpoints written before carry the field: it is ignored.
+        let mut old: serde_json::Value = serde_json::from_str(&json).unwrap();
+        old["planted_bug"] = "DropLoneAnti".into();
+        old["lead"] = 3.into();
+        let back: KernelConfig = serde_json::from_value(old).unwrap();
+        assert_eq!(back.planted_bug, PlantedBug::None);
     }
 }
