@@ -89,9 +89,29 @@ fn resume_without_executor_options_continues_on_the_checkpointed_executor() {
     assert_eq!(hash_of(&resumed), whole);
 }
 
-/// Runs `soda run` with a checkpoint every step and kills it with SIGKILL after `delay`;
+/// When a run is killed.
+#[derive(Clone, Copy, Debug)]
+enum KillAt {
+    /// After this long.
+    Delay(Duration),
+    /// As soon as a checkpoint's temporary file is seen (a write under way).
+    DuringWrite,
+}
+
+/// The temporary files of checkpoint `file` in its directory.
+fn temporaries(file: &Path) -> Vec<std::path::PathBuf> {
+    let temp_prefix = format!(".{}.tmp-", file.file_name().unwrap().to_string_lossy());
+    std::fs::read_dir(file.parent().unwrap())
+        .unwrap()
+        .map(|e| e.unwrap())
+        .filter(|e| e.file_name().to_string_lossy().starts_with(&temp_prefix))
+        .map(|e| e.path())
+        .collect()
+}
+
+/// Runs `soda run` with a checkpoint every step and kills it with SIGKILL at `when`;
 /// returns whether a checkpoint's temporary file was left (the kill hit a write).
-fn run_and_kill(args: &[&str], file: &Path, delay: Duration) -> bool {
+fn run_and_kill(args: &[&str], file: &Path, when: KillAt) -> bool {
     let mut child = Command::new(env!("CARGO_BIN_EXE_soda"))
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
@@ -99,25 +119,26 @@ fn run_and_kill(args: &[&str], file: &Path, delay: Duration) -> bool {
         .stderr(Stdio::null())
         .spawn()
         .expect("soda starts");
-    std::thread::sleep(delay);
+    match when {
+        KillAt::Delay(delay) => std::thread::sleep(delay),
+        KillAt::DuringWrite => {
+            let deadline = Instant::now() + Duration::from_secs(60);
+            while temporaries(file).is_empty()
+                && Instant::now() < deadline
+                && child.try_wait().unwrap().is_none()
+            {
+                std::thread::sleep(Duration::from_micros(100));
+            }
+        }
+    }
     // SIGKILL: no handler, no destructor, no cleanup runs.
     let _ = child.kill();
     let _ = child.wait();
-    let dir = file.parent().unwrap();
-    let temp_prefix = format!(".{}.tmp-", file.file_name().unwrap().to_string_lossy());
-    let mut left = false;
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let entry = entry.unwrap();
-        if entry
-            .file_name()
-            .to_string_lossy()
-            .starts_with(&temp_prefix)
-        {
-            left = true;
-            std::fs::remove_file(entry.path()).unwrap();
-        }
+    let left = temporaries(file);
+    for t in &left {
+        std::fs::remove_file(t).unwrap();
     }
-    left
+    !left.is_empty()
 }
 
 #[test]
@@ -130,16 +151,14 @@ fn run_killed_at_random_moments_resumes_to_the_uninterrupted_hash() {
     let mut rng = ChaCha8Rng::seed_from_u64(18);
     let mut killed_during_write = 0;
     let mut resumed = 0;
-    for (i, executor) in [
+    let executors = [
         vec!["--executor", "reference"],
         vec!["--executor", "virtual", "--worlds", "4"],
         vec!["--executor", "threaded", "--threads", "2", "--worlds", "2"],
-    ]
-    .iter()
-    .cycle()
-    .take(9)
-    .enumerate()
-    {
+    ];
+    // Nine kills at random moments, then one per executor as soon as a checkpoint write is
+    // seen under way (random moments alone hit a write only now and then).
+    for (i, executor) in executors.iter().cycle().take(12).enumerate() {
         let _ = std::fs::remove_file(&file);
         let args = [
             &scene[..],
@@ -150,12 +169,12 @@ fn run_killed_at_random_moments_resumes_to_the_uninterrupted_hash() {
         // Once the first run shows how long a checkpointed run takes, kill at random moments
         // of it; the first kill of each executor comes early, the others anywhere.
         let span = started.elapsed().as_millis().clamp(300, 4_000) as u64;
-        let delay = Duration::from_millis(if i < 3 {
-            rng.random_range(150..300)
-        } else {
-            rng.random_range(150..150 + span)
-        });
-        if run_and_kill(&args, &file, delay) {
+        let when = match i {
+            0..3 => KillAt::Delay(Duration::from_millis(rng.random_range(150..300))),
+            3..9 => KillAt::Delay(Duration::from_millis(rng.random_range(150..150 + span))),
+            _ => KillAt::DuringWrite,
+        };
+        if run_and_kill(&args, &file, when) {
             killed_during_write += 1;
         }
         if !file.exists() {
@@ -166,14 +185,14 @@ fn run_killed_at_random_moments_resumes_to_the_uninterrupted_hash() {
         assert_eq!(
             hash_of(&out),
             whole,
-            "killed after {delay:?} on {executor:?}, resumed:\n{out}"
+            "killed at {when:?} on {executor:?}, resumed:\n{out}"
         );
         resumed += 1;
     }
-    assert!(resumed >= 4, "only {resumed} of 9 kills left a checkpoint");
+    assert!(resumed >= 4, "only {resumed} of 12 kills left a checkpoint");
     assert!(
         killed_during_write >= 1,
-        "no kill of 9 hit a checkpoint write (each leaves its temporary file)"
+        "no kill of 12 hit a checkpoint write (each leaves its temporary file)"
     );
 }
 
