@@ -4,7 +4,7 @@
 //! A checkpoint is text in three parts:
 //!
 //! ```text
-//! soda-checkpoint 1                 the format and its version
+//! soda-checkpoint 2                 the format and its version
 //! {"model": …, "step": …, …}        one JSON document (a [`Checkpoint`])
 //! checksum 0123456789abcdef         FNV-1a 64 of every byte above this line
 //! ```
@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 pub const MAGIC: &str = "soda-checkpoint";
 
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// A model state that can be written as words holding its exact bits and read back
 /// identical (the same canonical hash, the same future).
@@ -318,9 +318,9 @@ fn finite_f32(w: &[u64], k: usize) -> Result<f32, String> {
     }
 }
 
-/// The built-in rigid body: 25 words — id, shape (0 ball / 1 cuboid, then radius or half
+/// The built-in rigid body: 26 words — id, shape (0 ball / 1 cuboid, then radius or half
 /// extents), inverse mass and inertia, friction, restitution, position, rotation (w, i, j, k),
-/// linear and angular velocity, rest steps.
+/// linear and angular velocity, rest steps, support depth.
 impl ExactState for crate::physics::Body {
     fn to_words(&self, out: &mut Vec<u64>) {
         let f = |v: f32| u64::from(v.to_bits());
@@ -340,13 +340,14 @@ impl ExactState for crate::physics::Body {
         out.extend(self.linvel.iter().map(|&v| f(v)));
         out.extend(self.angvel.iter().map(|&v| f(v)));
         out.push(u64::from(self.rest_steps));
+        out.push(u64::from(self.support_depth));
     }
 
     fn from_words(words: &[u64]) -> Result<Self, String> {
         use crate::math::{Quat, Vec3};
         use crate::physics::Shape;
-        if words.len() != 25 {
-            return Err(format!("a body has 25 words, this one {}", words.len()));
+        if words.len() != 26 {
+            return Err(format!("a body has 26 words, this one {}", words.len()));
         }
         let mut floats = [0f32; 23];
         for (k, &w) in words[2..].iter().take(23).enumerate() {
@@ -370,6 +371,8 @@ impl ExactState for crate::physics::Body {
         };
         let rest_steps = u32::try_from(words[24])
             .map_err(|_| "the rest-step count is not 32 bits".to_string())?;
+        let support_depth =
+            u32::try_from(words[25]).map_err(|_| "the support depth is not 32 bits".to_string())?;
         let q = nalgebra::Quaternion::new(floats[12], floats[13], floats[14], floats[15]);
         Ok(crate::physics::Body {
             id: words[0],
@@ -384,6 +387,7 @@ impl ExactState for crate::physics::Body {
             linvel: v3(16),
             angvel: v3(19),
             rest_steps,
+            support_depth,
         })
     }
 }
@@ -427,8 +431,10 @@ mod tests {
             ball in any::<bool>(),
             f in prop::array::uniform12(-50.0f32..50.0),
             rest_steps in any::<u32>(),
+            support_depth in any::<u32>(),
         ) {
-            let b = body(id, ball, f, rest_steps);
+            let mut b = body(id, ball, f, rest_steps);
+            b.support_depth = support_depth;
             let mut words = Vec::new();
             b.to_words(&mut words);
             let back = Body::from_words(&words).unwrap();
@@ -470,7 +476,7 @@ mod tests {
         body(1, true, [0.5; 12], 0).to_words(&mut words);
         assert!(Body::from_words(&words[..24])
             .unwrap_err()
-            .contains("25 words"));
+            .contains("26 words"));
         let mut bad_shape = words.clone();
         bad_shape[1] = 7;
         assert!(Body::from_words(&bad_shape)
