@@ -4,7 +4,7 @@
 //! A checkpoint is text in three parts:
 //!
 //! ```text
-//! soda-checkpoint 1                 the format and its version
+//! soda-checkpoint 2                 the format and its version
 //! {"model": …, "step": …, …}        one JSON document (a [`Checkpoint`])
 //! checksum 0123456789abcdef         FNV-1a 64 of every byte above this line
 //! ```
@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 pub const MAGIC: &str = "soda-checkpoint";
 
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// A model state that can be written as words holding its exact bits and read back
 /// identical (the same canonical hash, the same future).
@@ -354,9 +354,9 @@ fn finite_f32(w: &[u64], k: usize) -> Result<f32, StateDecodeError> {
     }
 }
 
-/// The built-in rigid body: 25 words — id, shape (0 ball / 1 cuboid, then radius or half
+/// The built-in rigid body: 26 words — id, shape (0 ball / 1 cuboid, then radius or half
 /// extents), inverse mass and inertia, friction, restitution, position, rotation (w, i, j, k),
-/// linear and angular velocity, rest steps.
+/// linear and angular velocity, rest steps, support depth.
 impl ExactState for crate::physics::Body {
     fn to_words(&self, out: &mut Vec<u64>) {
         let f = |v: f32| u64::from(v.to_bits());
@@ -376,15 +376,16 @@ impl ExactState for crate::physics::Body {
         out.extend(self.linvel.iter().map(|&v| f(v)));
         out.extend(self.angvel.iter().map(|&v| f(v)));
         out.push(u64::from(self.rest_steps));
+        out.push(u64::from(self.support_depth));
     }
 
     fn from_words(words: &[u64]) -> Result<Self, StateDecodeError> {
         use crate::math::{Quat, Vec3};
         use crate::physics::Shape;
-        if words.len() != 25 {
+        if words.len() != 26 {
             return Err(StateDecodeError::WordCount {
                 what: "a body",
-                expected: 25,
+                expected: 26,
                 found: words.len(),
             });
         }
@@ -410,6 +411,8 @@ impl ExactState for crate::physics::Body {
         };
         let rest_steps = u32::try_from(words[24])
             .map_err(|_| StateDecodeError::BadValue("the rest-step count is not 32 bits".into()))?;
+        let support_depth = u32::try_from(words[25])
+            .map_err(|_| StateDecodeError::BadValue("the support depth is not 32 bits".into()))?;
         let q = nalgebra::Quaternion::new(floats[12], floats[13], floats[14], floats[15]);
         Ok(crate::physics::Body {
             id: words[0],
@@ -424,6 +427,7 @@ impl ExactState for crate::physics::Body {
             linvel: v3(16),
             angvel: v3(19),
             rest_steps,
+            support_depth,
         })
     }
 }
@@ -467,8 +471,10 @@ mod tests {
             ball in any::<bool>(),
             f in prop::array::uniform12(-50.0f32..50.0),
             rest_steps in any::<u32>(),
+            support_depth in any::<u32>(),
         ) {
-            let b = body(id, ball, f, rest_steps);
+            let mut b = body(id, ball, f, rest_steps);
+            b.support_depth = support_depth;
             let mut words = Vec::new();
             b.to_words(&mut words);
             let back = Body::from_words(&words).unwrap();
@@ -509,7 +515,7 @@ mod tests {
         let mut words = Vec::new();
         body(1, true, [0.5; 12], 0).to_words(&mut words);
         let reason = |w: &[u64]| Body::from_words(w).unwrap_err().to_string();
-        assert!(reason(&words[..24]).contains("25 words"));
+        assert!(reason(&words[..24]).contains("26 words"));
         let mut bad_shape = words.clone();
         bad_shape[1] = 7;
         assert!(reason(&bad_shape).contains("shape kind 7"));

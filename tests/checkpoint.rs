@@ -246,8 +246,8 @@ fn damaged_edited_or_foreign_checkpoints_are_refused_with_a_reason() {
         assert!(err.contains("not a SODA checkpoint"), "{foreign:?}: {err}");
     }
     // A later format version.
-    let err = refused(&text.replacen("soda-checkpoint 1", "soda-checkpoint 2", 1));
-    assert!(err.contains("format version 2"), "{err}");
+    let err = refused(&text.replacen("soda-checkpoint 2", "soda-checkpoint 3", 1));
+    assert!(err.contains("format version 3"), "{err}");
     // Missing file.
     let err = fails(&["resume", s(&dir.path().join("missing.ckpt"))]);
     assert!(err.contains("cannot read the checkpoint"), "{err}");

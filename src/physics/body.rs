@@ -137,6 +137,12 @@ pub struct Body {
     /// `SolverParams::sleep_speed`), saturating at `SolverParams::sleep_steps`; the body is
     /// asleep when it equals `sleep_steps` (SPEC.md §5.4). Part of the hashed state.
     pub rest_steps: u32,
+    /// Support depth after the body's last step (SPEC.md §5.2): 1 if it touched a static
+    /// surface whose normal is within 45° of the vertical, `k + 1` if it rested on a body
+    /// of depth `k` (the least such), 0 if it rests on no support chain (in flight, or
+    /// without gravity). Only a body of depth > 0 carries another by shock propagation.
+    /// Part of the hashed state.
+    pub support_depth: u32,
 }
 
 impl Body {
@@ -162,6 +168,7 @@ impl Body {
             linvel: Vec3::zeros(),
             angvel: Vec3::zeros(),
             rest_steps: 0,
+            support_depth: 0,
         }
     }
 

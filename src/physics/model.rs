@@ -58,6 +58,8 @@ struct Contacts<'a> {
     pairs: Vec<PairEntry<'a>>,
     /// Whether every body partner with contact points was quiet at step `t` (SPEC.md §5.4).
     partners_quiet: bool,
+    /// The body's support depth after this step (SPEC.md §5.2).
+    support_depth: u32,
 }
 
 /// Manifolds of the pairs computed for one cell, keyed by (lower id, higher id).
@@ -90,6 +92,7 @@ impl RigidBodyModel {
         cache: &mut ManifoldCache,
     ) -> Contacts<'a> {
         let mut partners_quiet = true;
+        let mut support_depth = u32::MAX;
         let cap = self.prediction();
         let (g, margin) = (self.gravity.norm(), self.params.margin);
         let slack = self.filter_slack();
@@ -117,6 +120,7 @@ impl RigidBodyModel {
                 // rests on is immovable.
                 Some(lower) if lower == own.body.id => {}
                 Some(_) => {
+                    support_depth = support_depth.min(j.support_depth.saturating_add(1));
                     let mut set = view(own.body, j, &m);
                     for p in &mut set.points {
                         p.partner_inv_mass = 0.0;
@@ -141,12 +145,26 @@ impl RigidBodyModel {
             reach,
             keep_distance(reach, radius, radius, cap),
         ) {
+            if let Some(up) = self.up() {
+                if env
+                    .points
+                    .iter()
+                    .any(|p| p.normal.dot(&up) > SUPPORT_COSINE)
+                {
+                    support_depth = 1;
+                }
+            }
             sets.push(env);
         }
         Contacts {
             sets,
             pairs,
             partners_quiet,
+            support_depth: if support_depth == u32::MAX {
+                0
+            } else {
+                support_depth
+            },
         }
     }
 
@@ -186,16 +204,19 @@ impl RigidBodyModel {
         )
     }
 
-    /// Shock propagation (SPEC.md §5.2): if the pair of `a` (lower id) and `b` is a support —
-    /// with gravity, a normal within 45° of the vertical — the lower body's id. Every other
-    /// body contact is a symmetric pair. A pure function of the pair, so both bodies classify
-    /// it alike.
-    fn support(&self, a: &Body, b: &Body, m: &PairManifold) -> Option<BodyId> {
+    /// The unit vector against gravity, if there is gravity.
+    fn up(&self) -> Option<Vec3> {
         let g = self.gravity.norm();
-        if g <= 0.0 {
-            return None;
-        }
-        let up = -self.gravity / g;
+        (g > 0.0).then(|| -self.gravity / g)
+    }
+
+    /// Shock propagation (SPEC.md §5.2): if the pair of `a` (lower id) and `b` is a support —
+    /// with gravity, a normal within 45° of the vertical, and the lower body resting on a
+    /// support chain at step `t` (support depth > 0) — the lower body's id. Every other body
+    /// contact, in particular two bodies colliding in flight, is a symmetric pair. A pure
+    /// function of the pair's step-`t` states, so both bodies classify it alike.
+    fn support(&self, a: &Body, b: &Body, m: &PairManifold) -> Option<BodyId> {
+        let up = self.up()?;
         let c = m.normal_ab.dot(&up);
         let lower = if c > SUPPORT_COSINE {
             a
@@ -204,7 +225,7 @@ impl RigidBodyModel {
         } else {
             return None;
         };
-        Some(lower.id)
+        (lower.support_depth > 0).then_some(lower.id)
     }
 
     /// Whether a deferred impact is only projected (without gravity, SPEC.md §5.3): it keeps
@@ -562,6 +583,7 @@ impl CellModel for RigidBodyModel {
             }
             assert_finite(&next, step);
             self.cap(own, &mut next, step, events);
+            next.support_depth = found.support_depth;
             let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);
             next.rest_steps =
                 if self.sleeping() && found.partners_quiet && quiet(own) && quiet(&next) {
@@ -605,6 +627,7 @@ impl CellModel for RigidBodyModel {
             h.f32(c);
         }
         h.u32(b.rest_steps);
+        h.u32(b.support_depth);
     }
 
     /// Bit equality of every field (a `Body` compares equal exactly when its fields do, and
@@ -617,6 +640,7 @@ impl CellModel for RigidBodyModel {
         };
         a.id == b.id
             && a.rest_steps == b.rest_steps
+            && a.support_depth == b.support_depth
             && bits(&a.position) == bits(&b.position)
             && bits(&a.linvel) == bits(&b.linvel)
             && bits(&a.angvel) == bits(&b.angvel)
@@ -655,6 +679,7 @@ impl CellModel for RigidBodyModel {
             }
         }
         out.push(("rest_steps".to_string(), b.rest_steps.to_string()));
+        out.push(("support_depth".to_string(), b.support_depth.to_string()));
         out
     }
 }

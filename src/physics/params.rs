@@ -25,7 +25,8 @@ pub struct SolverParams {
     /// Angular speed cap in rad/s.
     pub max_angular_speed: f32,
     /// Largest separating speed at a contact point that a position correction may leave,
-    /// m/s (above restitution's own target).
+    /// m/s (above restitution's own target). 0 (the default) makes depenetration
+    /// energy-free; a positive value may add up to that speed per correction.
     pub max_separation_speed: f32,
     /// Speed below which a body counts as quiet for sleeping, m/s (linear speed, and angular
     /// speed times the bounding radius).
@@ -46,7 +47,7 @@ impl Default for SolverParams {
             margin: 0.02,
             max_speed: 30.0,
             max_angular_speed: 60.0,
-            max_separation_speed: 0.1,
+            max_separation_speed: 0.0,
             sleep_speed: 0.05,
             sleep_steps: 30,
         }

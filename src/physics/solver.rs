@@ -63,6 +63,8 @@ struct PointScratch {
     lambda: f32,
     /// Normal velocity of the point relative to the partner at the start of the substep.
     approach: f32,
+    /// Normal impulse of restitution applied after the impact pass (N·s).
+    bounce: f32,
 }
 
 /// One point's row of the position pass, fixed for a substep (at the predicted pose).
@@ -101,6 +103,31 @@ fn offset(body: &Body, rot: &Matrix3<f32>, cp: &ContactPoint) -> Vec3 {
     }
 }
 
+/// The part of the spin change `dw` (from a position correction) that only cancels spin:
+/// `dw` scaled by the largest `s ∈ [0, 1]` with `(ω + s·dω)ᵀ I (ω + s·dω) ≤ ωᵀ I ω` for the
+/// half-way bound `s ≤ −⟨ω, dω⟩_I / ⟨dω, dω⟩_I` (as the linear cap), `I` the world inertia at
+/// orientation `q`; then at most `allowance` rad/s more along `dω`.
+fn cancelling_spin(body: &Body, q: &Quat, w: &Vec3, dw: &Vec3, allowance: f32) -> Vec3 {
+    let len = dw.norm();
+    if len == 0.0 {
+        return Vec3::zeros();
+    }
+    let inertia = |a: &Vec3, b: &Vec3| {
+        let (la, lb) = (q.inverse_transform_vector(a), q.inverse_transform_vector(b));
+        (0..3)
+            .map(|k| la[k] * lb[k] / body.inv_inertia[k])
+            .sum::<f32>()
+    };
+    let dd = inertia(dw, dw);
+    let s = if dd > 0.0 {
+        (-inertia(w, dw) / dd).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let extra = ((1.0 - s) * len).min(allowance);
+    dw * s + dw * (extra / len)
+}
+
 /// Applies impulse `imp` at offset `r` to the velocities `v`, `w`.
 fn apply_impulse(f: &Frame, v: &mut Vec3, w: &mut Vec3, r: &Vec3, imp: &Vec3) {
     *v += imp * f.inv_mass;
@@ -134,6 +161,7 @@ pub(crate) fn solve_body(
     let mut impact = vec![ImpactRow::default(); count];
     let mut position = vec![PositionRow::default(); count];
     let mut engaged_sets = vec![false; sets.len()];
+    let mut bounced_sets = vec![false; sets.len()];
     let rest_threshold = 2.0 * gravity.norm() * h;
 
     for _ in 0..n_sub {
@@ -149,6 +177,7 @@ pub(crate) fn solve_body(
                     impulse: 0.0,
                     lambda: 0.0,
                     approach: cp.normal.dot(&(vi - cp.partner_velocity)),
+                    bounce: 0.0,
                 };
                 k += 1;
             }
@@ -214,6 +243,65 @@ pub(crate) fn solve_body(
             }
         }
 
+        // Restitution (Poisson, as for pairs, SPEC.md §5.3): per set whose fastest approach
+        // at the start of the substep exceeds the resting speed, each point the impact pass
+        // pushed receives, once the body has moved to contact, the rest of its compression
+        // impulse (the impulse that stops its approach entirely: the impact pass's,
+        // continued to a zero approach) and `e` times all of it. Unlike a per-point target
+        // speed (`−e·v_n` at each point, which added energy to spinning cubes hitting a wall
+        // on two corners), this never adds energy for `e ≤ 1`.
+        let mut k = 0;
+        for (s, set) in sets.iter().enumerate() {
+            let n_pts = set.points.len();
+            let range = k..k + n_pts;
+            k += n_pts;
+            bounced_sets[s] = false;
+            let fastest = scratch[range.clone()]
+                .iter()
+                .map(|sc| -sc.approach)
+                .fold(0.0f32, f32::max);
+            if set.restitution <= 0.0
+                || fastest <= rest_threshold
+                || scratch[range.clone()].iter().all(|sc| sc.impulse <= 0.0)
+            {
+                continue;
+            }
+            // The full compression impulses, on a copy of the velocities.
+            let (mut v, mut w) = (b.linvel, b.angvel);
+            let mut full: smallvec::SmallVec<[f32; 8]> =
+                scratch[range.clone()].iter().map(|sc| sc.impulse).collect();
+            for _ in 0..p.impact_iterations.max(1) {
+                let mut largest_change = 0.0f32;
+                for (m, (kk, cp)) in range.clone().zip(&set.points).enumerate() {
+                    if scratch[kk].impulse <= 0.0 {
+                        continue;
+                    }
+                    let row = &impact[kk];
+                    let vn = cp.normal.dot(&v) + w.dot(&row.rn);
+                    let next = (full[m] - vn * row.inv_w).max(0.0);
+                    if next != full[m] {
+                        let d = next - full[m];
+                        v += cp.normal * (d * f0.inv_mass);
+                        w += row.irn * d;
+                        full[m] = next;
+                        largest_change = largest_change.max(d.abs() * row.w);
+                    }
+                }
+                if largest_change < IMPACT_TOLERANCE {
+                    break;
+                }
+            }
+            // Applied at the end of the substep's motion (below): the rest of the
+            // compression, which the impact pass left to the gap, and `e` times all of it.
+            for (m, kk) in range.enumerate() {
+                let j = (full[m] - scratch[kk].impulse) + set.restitution * full[m];
+                if j > 0.0 {
+                    scratch[kk].bounce = j;
+                    bounced_sets[s] = true;
+                }
+            }
+        }
+
         // Predict.
         let xp = b.position + b.linvel * h;
         let qp = integrate_rotation(&b.rotation, &b.angvel, h);
@@ -273,10 +361,13 @@ pub(crate) fn solve_body(
         } else {
             (xp, qp, Vec3::zeros())
         };
-        // The velocity a correction adds may cancel the approach but not fling the body:
-        // along its own direction it is capped at the predicted velocity it opposes plus the
-        // separation allowance, so a correction never turns a fall into sideways or upward
-        // speed (spin: the predicted speed plus the allowance, over the bounding radius).
+        // The velocity a correction adds may cancel the approach but never add kinetic
+        // energy (split impulse: the positions take the whole correction, the velocities
+        // only what cancels motion against it). Linear: along its own direction it is
+        // capped at the predicted velocity it opposes (`|v + dv| ≤ |v|`), plus the
+        // separation allowance (0 by default). Angular, in the inertia metric: at most the
+        // spin it opposes (`(ω + dω)ᵀI(ω + dω) ≤ ωᵀIω`), plus the allowance over the
+        // bounding radius.
         let v_pred = b.linvel;
         let w_pred = b.angvel;
         let mut dv = (x1 - xp) / h;
@@ -287,27 +378,40 @@ pub(crate) fn solve_body(
                 dv *= dv_cap / dv_len;
             }
         }
-        let speed_cap = v_pred.norm() + p.max_separation_speed;
-        let mut dw = dtheta / h;
-        let dw_cap = w_pred.norm() + speed_cap / body.shape.bounding_radius();
-        if dw.norm() > dw_cap {
-            dw *= dw_cap / dw.norm();
-        }
+        let dw = cancelling_spin(
+            body,
+            &q1,
+            &w_pred,
+            &(dtheta / h),
+            p.max_separation_speed / body.shape.bounding_radius(),
+        );
         b.position = x1;
         b.rotation = q1;
         b.linvel = v_pred + dv;
         b.angvel = w_pred + dw;
+        // The restitution impulses, at the impact pass's rows (orientation at the start).
+        let mut k = 0;
+        for set in sets {
+            for cp in &set.points {
+                let j = scratch[k].bounce;
+                if j > 0.0 {
+                    b.linvel += cp.normal * (j * f0.inv_mass);
+                    b.angvel += impact[k].irn * j;
+                }
+                k += 1;
+            }
+        }
 
         // Velocity pass: per point that pushed in this substep, remove approach velocity
         // (or reflect it with the restitution) and apply Coulomb friction bounded by the
         // point's normal impulse.
         let f1 = Frame::new(&b, &q1);
         let mut k = 0;
-        for set in sets {
+        for (s, set) in sets.iter().enumerate() {
             for cp in &set.points {
                 let sc = scratch[k];
                 k += 1;
-                let normal_impulse = sc.impulse + sc.lambda / h;
+                let normal_impulse = sc.impulse + sc.bounce + sc.lambda / h;
                 if normal_impulse <= 0.0 {
                     continue;
                 }
@@ -316,17 +420,14 @@ pub(crate) fn solve_body(
                 let vn = cp.normal.dot(&vrel);
                 let vt = vrel - cp.normal * vn;
                 let mut dv = Vec3::zeros();
-                let target = if -sc.approach > rest_threshold {
-                    -set.restitution * sc.approach
-                } else {
-                    0.0
-                };
-                if vn < target {
-                    dv += cp.normal * (target - vn);
-                } else if vn > target.max(p.max_separation_speed) {
+                // Plastic: an approach left after the impact pass and the correction is
+                // stopped. A set that bounced keeps its separation (restitution's).
+                if vn < 0.0 {
+                    dv += cp.normal * -vn;
+                } else if !bounced_sets[s] && vn > p.max_separation_speed {
                     // Depenetration must not fling bodies: the separating speed a position
                     // correction produced is capped (the whole excess is removed on i's side).
-                    let excess = vn - target.max(p.max_separation_speed);
+                    let excess = vn - p.max_separation_speed;
                     let w_i = f1.inv_mass_at(&r, &cp.normal);
                     let imp = -cp.normal * (excess / w_i);
                     apply_impulse(&f1, &mut b.linvel, &mut b.angvel, &r, &imp);
