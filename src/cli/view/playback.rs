@@ -195,7 +195,7 @@ impl Playback {
                 buffered: buffered as u32,
                 starved: self.starved.load(Ordering::SeqCst),
                 rate: if now - started < Duration::from_secs(1) {
-                    recent.len() as f32 / (now - started).as_secs_f32().max(1e-3)
+                    recent.len() as f32 / (now - started).as_secs_f32().max(period.as_secs_f32())
                 } else {
                     recent.len() as f32
                 },
