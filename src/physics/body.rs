@@ -139,7 +139,8 @@ pub struct Body {
     pub rest_steps: u32,
     /// Support depth after the body's last step (SPEC.md §5.2): 1 if it touched a static
     /// surface whose normal is within 45° of the vertical, `k + 1` if it rested on a body
-    /// of depth `k` (the least such), 0 if it rests on no support chain (in flight, or
+    /// of depth `k` (the least such), else its landing depth if it is about to land on a
+    /// static surface or such a body, 0 if it rests on no support chain (in flight, or
     /// without gravity). Only a body of depth > 0 carries another by shock propagation.
     /// Part of the hashed state.
     pub support_depth: u32,

@@ -156,6 +156,11 @@ impl RigidBodyModel {
             }
             sets.push(env);
         }
+        if support_depth == u32::MAX {
+            if let Some(depth) = self.landing_depth(own, candidates) {
+                support_depth = depth;
+            }
+        }
         Contacts {
             sets,
             pairs,
@@ -166,6 +171,66 @@ impl RigidBodyModel {
                 support_depth
             },
         }
+    }
+
+    /// The support depth of a body that rests on no support at step `t` but is landing on
+    /// one (SPEC.md §5.2): within twice its speculative distance (the reach of the next step,
+    /// at step-`t` velocities) of an environment point whose normal is within 45° of `up`
+    /// (depth 1), or of a body with depth `k > 0` that would carry it as a support (depth
+    /// `k + 1`, the least such). `None` without gravity or if there is no such partner.
+    fn landing_depth(&self, own: &Candidate<'_>, candidates: &[Candidate<'_>]) -> Option<u32> {
+        let up = self.up()?;
+        let cap = self.prediction();
+        let (g, margin) = (self.gravity.norm(), self.params.margin);
+        let slack = self.filter_slack();
+        let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
+        let ahead = (2.0 * reach).min(cap);
+        let radius = own.body.shape.bounding_radius();
+        if let Some(env) = environment_contacts(
+            own.body,
+            &self.environment,
+            ahead,
+            keep_distance(ahead, radius, radius, cap),
+        ) {
+            if env
+                .points
+                .iter()
+                .any(|p| p.normal.dot(&up) > SUPPORT_COSINE)
+            {
+                return Some(1);
+            }
+        }
+        let mut depth = u32::MAX;
+        for c in candidates {
+            let j = c.body;
+            if j.id == own.body.id
+                || j.support_depth == 0
+                || j.support_depth.saturating_add(1) >= depth
+                || !own.may_touch(c, own.motion + c.motion + 2.0 * slack)
+                || !own.boxes_within(c, 2.0 * (own.motion + c.motion + slack))
+            {
+                continue;
+            }
+            let (a, b) = canonical(own.body, j);
+            let reach = speculative_distance(a, Some(b), self.dt, g, margin, cap);
+            let ahead = (2.0 * reach).min(cap);
+            if !near(a, b, ahead) {
+                continue;
+            }
+            let keep = keep_distance(
+                ahead,
+                a.shape.bounding_radius(),
+                b.shape.bounding_radius(),
+                cap,
+            );
+            let Some(m) = pair_manifold(a, b, ahead, keep) else {
+                continue;
+            };
+            if self.support(a, b, &m) == Some(j.id) {
+                depth = j.support_depth.saturating_add(1);
+            }
+        }
+        (depth != u32::MAX).then_some(depth)
     }
 
     /// The manifold of `a` (lower id) and `b` within `reach`, computed once per cell.
@@ -520,14 +585,26 @@ impl CellModel for RigidBodyModel {
             if candidates.is_empty() {
                 // Only bodies whose swept sphere can reach the box around the centre cell's
                 // swept bodies; slot order (the sets are put in ascending partner id later).
-                let (lo, hi, own_sweep) = nb.own().iter().fold(
-                    (Vec3::repeat(f32::MAX), Vec3::repeat(f32::MIN), 0.0f32),
-                    |(lo, hi, w), b| {
+                // Grown once more by the motions for the landing test's look-ahead
+                // (`landing_depth`, twice the speculative distance).
+                let (lo, hi, own_sweep, own_motion) = nb.own().iter().fold(
+                    (
+                        Vec3::repeat(f32::MAX),
+                        Vec3::repeat(f32::MIN),
+                        0.0f32,
+                        0.0f32,
+                    ),
+                    |(lo, hi, w, m), b| {
                         let c = Candidate::new(b, [0; 3], self.dt, self.prediction());
-                        (lo.inf(&b.position), hi.sup(&b.position), w.max(c.sweep))
+                        (
+                            lo.inf(&b.position),
+                            hi.sup(&b.position),
+                            w.max(c.sweep),
+                            m.max(c.motion),
+                        )
                     },
                 );
-                let grow = own_sweep + self.filter_slack();
+                let grow = own_sweep + own_motion + 2.0 * self.filter_slack();
                 // Sized for the whole neighbourhood up front: a filtered collect grows by
                 // reallocation (4, 8, 16, ... candidates), a measurable share of a step.
                 candidates.reserve_exact(nb.cells.iter().map(|c| c.len()).sum());
@@ -538,9 +615,8 @@ impl CellModel for RigidBodyModel {
                             .map(|b| Candidate::new(b, offset, self.dt, self.prediction()))
                             .filter(|c| {
                                 let p = c.body.position;
-                                (0..3).all(|k| {
-                                    p[k] >= lo[k] - grow - c.sweep && p[k] <= hi[k] + grow + c.sweep
-                                })
+                                let r = c.sweep + c.motion;
+                                (0..3).all(|k| p[k] >= lo[k] - grow - r && p[k] <= hi[k] + grow + r)
                             }),
                     );
                 }
