@@ -10,6 +10,7 @@ const $ = (id) => document.getElementById(id);
 const soda = {
   scene: null, frames: 0, shown: null, outcomes: [], saved: null, selected: null,
   socket: null, ids: [],
+  drawMs: 0, renderMs: 0,   // the page's own cost per frame: decoding and instancing, and WebGL
 };
 window.soda = soda;
 
@@ -37,10 +38,17 @@ let flashMesh = null;                     // cells flashing after a rollback
 const flash = new Map();                  // cell -> intensity
 let lastRollbacks = null;
 
+// World colours, made once per (world, asleep): a frame of 8,000 bodies allocates none.
+const colours = new Map();
 function palette(world, worlds, asleep) {
-  const c = new THREE.Color();
-  if (world === 0xffff) return c.setRGB(0.5, 0.5, 0.5);
-  c.setHSL(((world * 0.61803398875) % 1 + 1) % 1, 0.65, asleep ? 0.38 : 0.55);
+  const key = world * 2 + (asleep ? 1 : 0);
+  let c = colours.get(key);
+  if (!c) {
+    c = new THREE.Color();
+    if (world === 0xffff) c.setRGB(0.5, 0.5, 0.5);
+    else c.setHSL(((world * 0.61803398875) % 1 + 1) % 1, 0.65, asleep ? 0.38 : 0.55);
+    colours.set(key, c);
+  }
   return c;
 }
 
@@ -210,7 +218,7 @@ function drawPanel(f) {
   $('step').textContent = f.step;
   $('hash').textContent = f.hash;
   $('gvt').textContent = soda.scene.worlds > 1 || soda.scene.executor !== 'reference' ? `${f.gvt} (${f.gvt - f.step} ahead)` : 'reference: none';
-  $('rate').textContent = `${f.rate.toFixed(1)} frames/s, page ${pageRate.toFixed(0)} fps`;
+  $('rate').textContent = `${f.rate.toFixed(1)} frames/s, page ${pageRate.toFixed(0)} fps (draw ${soda.drawMs.toFixed(1)} ms, render ${soda.renderMs.toFixed(1)} ms)`;
   const seconds = f.buffered / (soda.scene.fps * f.speed);
   $('buffer').textContent = `${f.buffered} frames, ${seconds.toFixed(2)} s`;
   $('starved').textContent = `${f.starved} ticks`;
@@ -356,9 +364,16 @@ resize();
 function loop(now) {
   const dt = now - lastTime; lastTime = now;
   pageRate = pageRate * 0.9 + (dt > 0 ? 1000 / dt : 0) * 0.1;
-  if (pending && soda.scene) { draw(pending); pending = null; }
+  if (pending && soda.scene) {
+    const t0 = performance.now();
+    draw(pending);
+    pending = null;
+    soda.drawMs = soda.drawMs * 0.9 + (performance.now() - t0) * 0.1;
+  }
   controls.update();
+  const r0 = performance.now();
   renderer.render(world3, camera);
+  soda.renderMs = soda.renderMs * 0.9 + (performance.now() - r0) * 0.1;
   requestAnimationFrame(loop);
 }
 requestAnimationFrame(loop);
