@@ -4,21 +4,12 @@
 
 mod cli_support;
 
-use cli_support::{fails, ok, stderr};
+use cli_support::{fails, hash_of, ok, stderr};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// The `hash` line's value of a summary.
-fn hash_of(summary: &str) -> String {
-    summary
-        .lines()
-        .find_map(|l| l.strip_prefix("hash"))
-        .map(|h| h.trim().to_string())
-        .unwrap_or_else(|| panic!("no hash line in:\n{summary}"))
-}
 
 fn s(p: &Path) -> &str {
     p.to_str().expect("temporary paths are UTF-8")

@@ -4,7 +4,7 @@
 
 mod cli_support;
 
-use cli_support::{fails, soda, stderr, stdout, usage_error};
+use cli_support::{fails, hash_line, soda, stderr, stdout, usage_error};
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -26,12 +26,6 @@ fn refused_before_the_run(args: &[&str]) -> String {
         start.elapsed()
     );
     err
-}
-
-fn hash_line(out: &str) -> Option<String> {
-    out.lines()
-        .find(|l| l.split_whitespace().next() == Some("hash"))
-        .map(|l| l.split_whitespace().nth(1).unwrap_or("").to_string())
 }
 
 /// Every hidden temporary file (`.NAME.tmp-PID`) left in `dir`.

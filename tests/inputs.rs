@@ -4,7 +4,7 @@
 
 mod cli_support;
 
-use cli_support::{fails, ok};
+use cli_support::{fails, hash_of, ok};
 use soda::prelude::*;
 use soda::scene::{parse_inputs, SceneBuilder, SceneFormat};
 use soda::{Body, RigidBodyModel};
@@ -33,14 +33,6 @@ action = "set-velocity"
 id = 5000
 velocity = [1.0, 0.0, 0.0]
 "#;
-
-fn hash_of(summary: &str) -> String {
-    summary
-        .lines()
-        .find_map(|l| l.strip_prefix("hash"))
-        .map(|h| h.trim().to_string())
-        .unwrap_or_else(|| panic!("no hash line in:\n{summary}"))
-}
 
 fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> String {
     let path = dir.path().join(name);

@@ -251,7 +251,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
 }
 
 /// Reads and parses an input script (validated against the scene by `execute`).
-fn read_script(path: &Path) -> Result<InputScript> {
+pub(super) fn read_script(path: &Path) -> Result<InputScript> {
     let Some(format) = soda::scene::SceneFormat::from_path(path) else {
         bail!(
             "--inputs `{}`: an input script's name must end in .toml or .json",

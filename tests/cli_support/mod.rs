@@ -53,3 +53,15 @@ pub fn usage_error(args: &[&str]) -> String {
     assert!(!err.contains("panicked"), "soda {args:?} panicked: {err}");
     err
 }
+
+/// The value of a summary's `hash` line, if it has one.
+pub fn hash_line(out: &str) -> Option<String> {
+    out.lines()
+        .find(|l| l.split_whitespace().next() == Some("hash"))
+        .map(|l| l.split_whitespace().nth(1).unwrap_or("").to_string())
+}
+
+/// The value of a summary's `hash` line; fails the test if there is none.
+pub fn hash_of(summary: &str) -> String {
+    hash_line(summary).unwrap_or_else(|| panic!("no hash line in:\n{summary}"))
+}

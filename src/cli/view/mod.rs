@@ -16,10 +16,12 @@ mod server;
 
 use super::exec_args::{ExecutorArg, ExecutorArgs};
 use super::numbers::whole;
+use super::plan::OutputPlan;
 use super::source::SceneArgs;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use soda::frame::StatesWanted;
 use soda::scene::{InputScript, SceneFormat};
+
 use soda::sim::{run_scene_controlled, ExecutorKind};
 use std::net::{Ipv4Addr, SocketAddr, TcpListener};
 use std::path::{Path, PathBuf};
@@ -82,7 +84,7 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
     let options = executor.options()?;
     let (scene, _origin, _source) = args.scene.load_with_source()?;
     let script = match &args.inputs {
-        Some(path) => read_script(path)?,
+        Some(path) => super::run::read_script(path)?,
         None => InputScript::default(),
     };
     let origin = args
@@ -92,7 +94,7 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
     let scripted = script
         .to_inputs(&scene, &origin, 1)
         .with_context(|| format!("cannot use the input script `{origin}`"))?;
-    check_save_prefix(&args.save, args.scene.file(), args.inputs.as_deref())?;
+    let save_to = plan_save(&args.save, args.scene.file(), args.inputs.as_deref())?;
     let scene_file = SceneFormat::Json
         .render(&scene)
         .context("cannot write the scene as a scene file for \"save run\"")?;
@@ -118,7 +120,7 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
         desk: desk.clone(),
         scene_json: scene_message(&scene, &options, args),
         events: events.clone(),
-        save_prefix: args.save.clone(),
+        save_to,
         scene_file,
     });
     std::thread::Builder::new()
@@ -228,77 +230,24 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
     std::process::exit(i32::from(soda::app::interrupt::exit_status()));
 }
 
-/// Reads an input script (`--inputs`).
-fn read_script(path: &Path) -> Result<InputScript> {
-    let Some(format) = SceneFormat::from_path(path) else {
-        bail!(
-            "--inputs `{}`: an input script's name must end in .toml or .json",
-            path.display()
-        );
-    };
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read the input script `{}`", path.display()))?;
-    soda::scene::parse_inputs(&text, format, &path.display().to_string())
-        .with_context(|| format!("cannot load the input script `{}`", path.display()))
-}
-
-/// Checks before the run that "save run" can write beside `prefix` and would overwrite
-/// neither the scene file nor the input script given.
-fn check_save_prefix(prefix: &Path, scene: Option<&Path>, inputs: Option<&Path>) -> Result<()> {
-    let dir = match prefix.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    if !dir.is_dir() {
-        bail!(
-            "--save `{}`: the directory `{}` does not exist; create it or give another prefix",
-            prefix.display(),
-            dir.display()
-        );
+/// Checks before the run, with the other commands' output checks, that "save run" can write
+/// `PREFIX.scene.json` and `PREFIX.inputs.json` and would overwrite neither the scene file
+/// nor the input script given; returns the two paths to write.
+fn plan_save(
+    prefix: &Path,
+    scene: Option<&Path>,
+    inputs: Option<&Path>,
+) -> Result<(PathBuf, PathBuf)> {
+    let mut plan = OutputPlan::new();
+    if let Some(scene) = scene {
+        plan.input("the scene file", scene);
     }
-    tempfile_in(&dir).with_context(|| {
-        format!(
-            "--save `{}`: cannot write in `{}`; give a prefix in a writable directory",
-            prefix.display(),
-            dir.display()
-        )
-    })?;
-    for suffix in [".scene.json", ".inputs.json"] {
-        let target = server::with_suffix(prefix, suffix);
-        if target.is_dir() {
-            bail!(
-                "--save `{}`: `{}` is a directory; give another prefix",
-                prefix.display(),
-                target.display()
-            );
-        }
-        for (what, given) in [("--scene", scene), ("--inputs", inputs)] {
-            if let Some(given) = given {
-                if same_file(&target, given) {
-                    bail!(
-                        "--save `{}` would overwrite the {what} file `{}`; give another prefix",
-                        prefix.display(),
-                        given.display()
-                    );
-                }
-            }
-        }
+    if let Some(inputs) = inputs {
+        plan.input("the input script", inputs);
     }
-    Ok(())
-}
-
-/// A file created and removed in `dir`, proving it writable.
-fn tempfile_in(dir: &Path) -> std::io::Result<()> {
-    let path = dir.join(format!(".soda-view-probe-{}", std::process::id()));
-    std::fs::write(&path, b"")?;
-    std::fs::remove_file(&path)
-}
-
-fn same_file(a: &Path, b: &Path) -> bool {
-    match (a.canonicalize(), b.canonicalize()) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => a == b,
-    }
+    let scene_out = plan.file("--save", &server::with_suffix(prefix, ".scene.json"))?;
+    let inputs_out = plan.file("--save", &server::with_suffix(prefix, ".inputs.json"))?;
+    Ok((scene_out, inputs_out))
 }
 
 /// The scene as the page needs it (sent once per connection).

@@ -29,8 +29,8 @@ pub struct ViewerState {
     pub scene_json: String,
     /// Outcomes of acts and saves, for every page.
     pub events: broadcast::Sender<String>,
-    /// Where "save run" writes: `PREFIX.scene.json` and `PREFIX.inputs.json`.
-    pub save_prefix: PathBuf,
+    /// Where "save run" writes the scene and the input log (checked before the run).
+    pub save_to: (PathBuf, PathBuf),
     /// The scene as a JSON scene file.
     pub scene_file: String,
 }
@@ -173,13 +173,12 @@ fn handle(state: &ViewerState, text: &str) -> Result<Option<String>, String> {
 fn save(state: &ViewerState) -> Result<String, String> {
     let shown = state.playback.shown();
     let (step, hash) = shown.as_ref().map_or((0, 0), |s| (s.step, s.hash));
-    let scene_path = with_suffix(&state.save_prefix, ".scene.json");
-    let inputs_path = with_suffix(&state.save_prefix, ".inputs.json");
+    let (scene_path, inputs_path) = &state.save_to;
     let log = state.desk.log();
     let inputs = serde_json::to_string_pretty(&log).map_err(|e| e.to_string())?;
-    soda::app::atomic::write(&scene_path, state.scene_file.as_bytes())
+    soda::app::atomic::write(scene_path, state.scene_file.as_bytes())
         .map_err(|e| format!("save run: {e:#}"))?;
-    soda::app::atomic::write(&inputs_path, inputs.as_bytes())
+    soda::app::atomic::write(inputs_path, inputs.as_bytes())
         .map_err(|e| format!("save run: {e:#}"))?;
     let command = format!(
         "soda run --scene {} --inputs {} --steps {step}",
