@@ -71,20 +71,36 @@ pub fn fill_display_fields(bytes: &mut [u8], fields: DisplayFields) {
     bytes[60..64].copy_from_slice(&u32::from(fields.paused).to_le_bytes());
 }
 
-/// Encodes the committed bodies of `step` (sorted by id) with the run's status `live`
-/// (`None` on the reference executor: one world owning every cell).
-pub fn encode(
-    step: u64,
-    hash: u64,
-    bodies: &[&Body],
-    grid: &Grid,
-    live: Option<&LiveStatus>,
-) -> EncodedFrame {
-    let cells = grid.cell_count();
-    let owners: Vec<u32> = match live {
-        Some(l) => l.owners(cells),
-        None => vec![0; cells],
-    };
+/// The run's status as frames carry it: the last [`LiveStatus`] looked at (`None` on the
+/// reference executor: one world owning every cell) and the owner of every cell, worked out
+/// once per look rather than once per frame.
+#[derive(Debug)]
+pub struct Look {
+    live: Option<LiveStatus>,
+    owners: Vec<u16>,
+}
+
+impl Look {
+    /// The status `live` of a run on `grid`.
+    pub fn new(live: Option<LiveStatus>, grid: &Grid) -> Look {
+        let cells = grid.cell_count();
+        let owners = match &live {
+            Some(l) => l
+                .owners(cells)
+                .iter()
+                .map(|&o| o.min(0xFFFF) as u16)
+                .collect(),
+            None => vec![0; cells],
+        };
+        Look { live, owners }
+    }
+}
+
+/// Encodes the committed bodies of `step` (sorted by id) with the run's status `look`.
+pub fn encode(step: u64, hash: u64, bodies: &[&Body], grid: &Grid, look: &Look) -> EncodedFrame {
+    let live = look.live.as_ref();
+    let owners = &look.owners;
+    let cells = owners.len();
     let worlds = live.map_or(1, |l| l.worlds.len());
     let owner_bytes = (cells * 2).div_ceil(4) * 4;
     let mut b = Vec::with_capacity(
@@ -115,14 +131,14 @@ pub fn encode(
             b.extend_from_slice(&[0u8; 16]);
         }
     }
-    for &o in &owners {
-        b.extend_from_slice(&(o.min(0xFFFF) as u16).to_le_bytes());
+    for &o in owners {
+        b.extend_from_slice(&o.to_le_bytes());
     }
     b.resize(b.len() + owner_bytes - cells * 2, 0);
     for body in bodies {
         let world = grid
             .cell_of(body.position.into())
-            .map_or(0xFFFF, |c| owners[grid.index(c)].min(0xFFFF) as u16);
+            .map_or(0xFFFF, |c| owners[grid.index(c)]);
         b.extend_from_slice(&(body.id as u32).to_le_bytes());
         b.extend_from_slice(&((body.id >> 32) as u32).to_le_bytes());
         b.extend_from_slice(&world.to_le_bytes());
@@ -190,7 +206,8 @@ mod tests {
                 },
             ],
         };
-        let mut f = encode(8, 0x1122_3344_5566_7788, &[&body], &grid, Some(&live));
+        let look = Look::new(Some(live), &grid);
+        let mut f = encode(8, 0x1122_3344_5566_7788, &[&body], &grid, &look);
         fill_display_fields(
             &mut f.bytes,
             DisplayFields {

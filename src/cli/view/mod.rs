@@ -154,7 +154,7 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
     let committed = AtomicU64::new(0);
     let last_hash = AtomicU64::new(0);
     let mut last_look = Instant::now() - Duration::from_secs(1);
-    let mut live = None;
+    let mut look = frames::Look::new(None, &grid);
     let stop_asked = || soda::app::interrupt::requested();
     let wanted = StatesWanted {
         every: 1,
@@ -187,11 +187,11 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
             // The worlds are looked at about as often as the display shows frames.
             if last_look.elapsed() >= Duration::from_millis(15) {
                 if let Some(status) = control.live_status() {
-                    live = Some(status);
+                    look = frames::Look::new(Some(status), &grid);
                 }
                 last_look = Instant::now();
             }
-            let mut encoded = frames::encode(frame.step, frame.hash, bodies, &grid, live.as_ref());
+            let mut encoded = frames::encode(frame.step, frame.hash, bodies, &grid, &look);
             committed.store(frame.step, Ordering::SeqCst);
             last_hash.store(frame.hash, Ordering::SeqCst);
             // Wait for room in the buffer; acts that come meanwhile (the display paused, say)
