@@ -25,14 +25,19 @@
 
 #[allow(dead_code)]
 mod common;
+// Only `insert_body`: the bodies go into Rapier as in the speed benches.
 #[path = "common/knobs.rs"]
 #[allow(dead_code)]
 mod knobs;
+#[allow(dead_code)]
+#[path = "common/rapier_world.rs"]
+mod rapier_world;
 
 use common::{measure_pile, Footprint, PileBody};
 use rand::{Rng, SeedableRng};
-use rapier3d_new::math::{Pose, Rotation, Vector};
-use rapier3d_new::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle};
+use rapier3d_new::math::Vector;
+use rapier3d_new::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyHandle};
+use rapier_world::insert_body;
 use serde::Serialize;
 use soda::physics::{Body, Material, Shape};
 use soda::scene::builtin::builtin;
@@ -89,10 +94,6 @@ fn run_soda(scene: &Scene, steps: u64) -> (f64, State, State) {
     (wall, first, last)
 }
 
-fn v(x: soda::math::Vec3) -> Vector {
-    Vector::new(x.x, x.y, x.z)
-}
-
 /// Runs `scene` in Rapier 0.36 for `steps` steps: wall time, states at step 0 and at the end.
 fn run_rapier(scene: &Scene, steps: u64) -> (f64, State, State) {
     let mut w = PhysicsWorld::new();
@@ -125,31 +126,7 @@ fn run_rapier(scene: &Scene, steps: u64) -> (f64, State, State) {
         fixed([mid[0], hi[1] + 1.0, mid[2]], [half[0], 1.0, half[2]]);
     }
     let first = scene.initial_bodies();
-    let handles: Vec<RigidBodyHandle> = first
-        .iter()
-        .map(|b| {
-            let q = b.rotation.quaternion();
-            let rb = RigidBodyBuilder::dynamic()
-                .pose(Pose::from_parts(
-                    v(b.position),
-                    Rotation::from_xyzw(q.i, q.j, q.k, q.w),
-                ))
-                .linvel(v(b.linvel))
-                .angvel(v(b.angvel));
-            let shape = match b.shape {
-                Shape::Cuboid { half_extents: e } => ColliderBuilder::cuboid(e[0], e[1], e[2]),
-                Shape::Ball { radius } => ColliderBuilder::ball(radius),
-            };
-            w.insert(
-                rb,
-                shape
-                    .density(b.mass() / b.shape.volume())
-                    .friction(b.friction)
-                    .restitution(b.restitution),
-            )
-            .0
-        })
-        .collect();
+    let handles: Vec<RigidBodyHandle> = first.iter().map(|b| insert_body(&mut w, b)).collect();
     let start = Instant::now();
     for _ in 0..steps {
         w.step();

@@ -21,6 +21,32 @@ fn v(x: soda::math::Vec3) -> Vector {
     Vector::new(x.x, x.y, x.z)
 }
 
+/// Inserts SODA's body `b` into `world` as a dynamic Rapier body with the same pose,
+/// velocities, shape, mass, friction and restitution; returns its handle.
+pub fn insert_body(world: &mut PhysicsWorld, b: &Body) -> RigidBodyHandle {
+    let q = b.rotation.quaternion();
+    let rb = RigidBodyBuilder::dynamic()
+        .pose(Pose::from_parts(
+            v(b.position),
+            Rotation::from_xyzw(q.i, q.j, q.k, q.w),
+        ))
+        .linvel(v(b.linvel))
+        .angvel(v(b.angvel));
+    let shape = match b.shape {
+        Shape::Cuboid { half_extents: e } => ColliderBuilder::cuboid(e[0], e[1], e[2]),
+        Shape::Ball { radius } => ColliderBuilder::ball(radius),
+    };
+    world
+        .insert(
+            rb,
+            shape
+                .density(b.mass() / b.shape.volume())
+                .friction(b.friction)
+                .restitution(b.restitution),
+        )
+        .0
+}
+
 impl RapierWorld {
     /// The scene's bodies and ground in Rapier.
     pub fn new(scene: &Scene, initial: &[Body], footprint: &Footprint) -> Self {
@@ -43,32 +69,7 @@ impl RapierWorld {
                 .restitution(scene.environment.restitution),
             None,
         );
-        let handles = initial
-            .iter()
-            .map(|b| {
-                let q = b.rotation.quaternion();
-                let rb = RigidBodyBuilder::dynamic()
-                    .pose(Pose::from_parts(
-                        v(b.position),
-                        Rotation::from_xyzw(q.i, q.j, q.k, q.w),
-                    ))
-                    .linvel(v(b.linvel))
-                    .angvel(v(b.angvel));
-                let shape = match b.shape {
-                    Shape::Cuboid { half_extents: e } => ColliderBuilder::cuboid(e[0], e[1], e[2]),
-                    Shape::Ball { radius } => ColliderBuilder::ball(radius),
-                };
-                world
-                    .insert(
-                        rb,
-                        shape
-                            .density(b.mass() / b.shape.volume())
-                            .friction(b.friction)
-                            .restitution(b.restitution),
-                    )
-                    .0
-            })
-            .collect();
+        let handles = initial.iter().map(|b| insert_body(&mut world, b)).collect();
         RapierWorld { world, handles }
     }
 
