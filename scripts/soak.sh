@@ -14,7 +14,10 @@
 #
 # Environment: SOAK_JOBS (parallel verify processes, default: the cores), SOAK_STEPS (steps
 # per run, default 60), SOAK_CHUNK (seeds per verify process and mode, default 200),
-# SOAK_SCENES (default: every built-in).
+# SOAK_SCENES (default: every built-in), SOAK_SODA (a `soda` binary to use instead of building
+# one, e.g. a copy so that rebuilding meanwhile does not change what is soaked), SOAK_FRESH=1 (start over; by default a piece whose
+# log in $SOAK_OUT already ends in "all ... runs committed" is kept and not run again, so an
+# interrupted soak resumes where it stopped — with the same SCHEDULES, SOAK_STEPS and SOAK_CHUNK).
 set -euo pipefail
 
 schedules=${1:-100000}
@@ -29,8 +32,12 @@ modes=3
 
 mkdir -p "$out"
 cd "$root"
-cargo build --release --bin soda
-soda=${CARGO_TARGET_DIR:-$root/target}/release/soda
+if [ -n "${SOAK_SODA:-}" ]; then
+    soda=$SOAK_SODA
+else
+    cargo build --release --bin soda
+    soda=${CARGO_TARGET_DIR:-$root/target}/release/soda
+fi
 
 # 1. Virtual-executor schedules: each verify process checks `chunk` seeds in each of the
 #    three modes; seeds are split evenly between the scenes.
@@ -38,16 +45,24 @@ status=0
 if [ "$schedules" -gt 0 ]; then
     nscenes=$(wc -w <<<"$scenes")
     per_scene=$(((schedules + nscenes * modes - 1) / (nscenes * modes)))
-    rm -f "$out"/verify-*.log
+    if [ "${SOAK_FRESH:-0}" = 1 ]; then
+        rm -f "$out"/verify-*.log "$out/verify-wall.txt"
+    fi
     jobs_file="$out/verify-jobs.txt"
     : >"$jobs_file"
+    kept=0
     for scene in $scenes; do
         for ((first = 0; first < per_scene; first += chunk)); do
             n=$((per_scene - first < chunk ? per_scene - first : chunk))
+            log="$out/verify-$scene-$first.log"
+            if [ -f "$log" ] && grep -q "^all $((n * modes)) runs committed" "$log"; then
+                kept=$((kept + 1))
+                continue
+            fi
             echo "$scene $first $n $steps $out" >>"$jobs_file"
         done
     done
-    echo "soak: $((per_scene * nscenes * modes)) virtual runs ($per_scene seeds x $modes modes x $nscenes scenes, $steps steps each) in $(wc -l <"$jobs_file") pieces on $jobs processes"
+    echo "soak: $((per_scene * nscenes * modes)) virtual runs ($per_scene seeds x $modes modes x $nscenes scenes, $steps steps each); $(wc -l <"$jobs_file") pieces to run on $jobs processes, $kept already complete"
     start=$(date +%s)
     # A diverging piece exits 1; keep going and count from the logs.
     xargs -r -P "$jobs" -L 1 sh -c '
@@ -55,6 +70,9 @@ if [ "$schedules" -gt 0 ]; then
             >"$5/verify-$1-$2.log" 2>&1 || true
     ' "$soda" <"$jobs_file"
     verify_seconds=$(($(date +%s) - start))
+    # Wall time summed over every invocation that added pieces to this soak.
+    echo "$verify_seconds" >>"$out/verify-wall.txt"
+    verify_seconds=$(awk '{ s += $1 } END { print s }' "$out/verify-wall.txt")
     runs=$(cat "$out"/verify-*.log | grep -c '^ok ' || true)
     diverged=$(cat "$out"/verify-*.log | grep -c '^DIVERGED' || true)
     failed=$(grep -L '^all .* runs committed' "$out"/verify-*.log | wc -l)
