@@ -21,7 +21,9 @@
 //! (SODA's `Body::kinetic_energy` on bodies rebuilt from Rapier's state).
 //!
 //! `cargo bench --bench quality` prints a markdown table (and writes target/quality.json);
-//! without `--bench` it runs a 20-step smoke version.
+//! without `--bench` it runs a 20-step smoke version. `QUALITY_CASES=gas-settling,cube-pile`
+//! runs only those scenes, `QUALITY_ENGINES=soda` (or `rapier`) only that engine, and
+//! `QUALITY_SCENES=DIR` also writes each scene as `DIR/NAME.json`, for `soda run --scene`.
 
 #[allow(dead_code)]
 mod common;
@@ -327,15 +329,60 @@ fn main() {
             measure: settled,
         },
     ];
+    let wanted_cases = list_from_env("QUALITY_CASES");
+    let wanted_engines = list_from_env("QUALITY_ENGINES");
+    for w in wanted_cases.iter().flatten() {
+        assert!(
+            cases.iter().any(|c| c.name == w),
+            "QUALITY_CASES: {w:?} is not one of {:?}",
+            cases.iter().map(|c| c.name).collect::<Vec<_>>()
+        );
+    }
+    for w in wanted_engines.iter().flatten() {
+        assert!(
+            w == "soda" || w == "rapier",
+            "QUALITY_ENGINES: {w:?} is not `soda` or `rapier`"
+        );
+    }
+    let cases: Vec<Case> = cases
+        .into_iter()
+        .filter(|c| {
+            wanted_cases
+                .as_ref()
+                .is_none_or(|w| w.iter().any(|n| n == c.name))
+        })
+        .collect();
+    if let Some(dir) = std::env::var_os("QUALITY_SCENES") {
+        let dir = std::path::PathBuf::from(dir);
+        for case in &cases {
+            let path = dir.join(format!("{}.json", case.name));
+            let text = soda::scene::SceneFormat::Json
+                .render(&case.scene)
+                .expect("a built scene renders");
+            std::fs::write(&path, text)
+                .unwrap_or_else(|e| panic!("writing {}: {e}", path.display()));
+            eprintln!("quality: scene written to {}", path.display());
+        }
+    }
     let mut rows = Vec::new();
     let mut table =
         String::from("| scene | steps | engine | wall s | measures |\n|---|---:|---|---:|---|\n");
     for case in &cases {
         let mut figures = Vec::new();
-        for (engine, run) in [
-            ("SODA", run_soda as fn(&Scene, u64) -> (f64, State, State)),
-            ("Rapier 0.36", run_rapier),
+        for (key, engine, run) in [
+            (
+                "soda",
+                "SODA",
+                run_soda as fn(&Scene, u64) -> (f64, State, State),
+            ),
+            ("rapier", "Rapier 0.36", run_rapier),
         ] {
+            if wanted_engines
+                .as_ref()
+                .is_some_and(|w| !w.iter().any(|n| n == key))
+            {
+                continue;
+            }
             let (wall, first, last) = run(&case.scene, case.steps);
             let values = (case.measure)(&case.scene, &first, &last);
             eprintln!("quality: {} {engine}: {wall:.3} s, {values:?}", case.name);
@@ -371,6 +418,16 @@ fn main() {
         .unwrap_or_else(|e| panic!("writing {}: {e}", path.display()));
         println!("written to {}", path.display());
     }
+}
+
+/// A comma-separated, lower-cased list from the environment variable `name`, if it is set.
+fn list_from_env(name: &str) -> Option<Vec<String>> {
+    std::env::var(name).ok().map(|v| {
+        v.split(',')
+            .map(|s| s.trim().to_lowercase())
+            .filter(|s| !s.is_empty())
+            .collect()
+    })
 }
 
 /// Four significant digits, plain.

@@ -138,7 +138,7 @@ pub struct Body {
     /// asleep when it equals `sleep_steps` (SPEC.md §5.4). Part of the hashed state.
     pub rest_steps: u32,
     /// Support depth after the body's last step (SPEC.md §5.2): 1 if it touched a static
-    /// surface whose normal is within 45° of the vertical, `k + 1` if it rested on a body
+    /// surface whose normal is within 75° of the vertical, `k + 1` if it rested on a body
     /// of depth `k` (the least such), else its landing depth if it is about to land on a
     /// static surface or such a body, 0 if it rests on no support chain (in flight, or
     /// without gravity). Only a body of depth > 0 carries another by shock propagation.

@@ -18,8 +18,11 @@ use crate::model::{BodyId, CellModel, Neighbourhood, Step};
 use std::cell::OnceCell;
 
 /// Cosine of the largest angle between a contact normal and the vertical for which the
-/// contact counts as support (shock propagation, SPEC.md §Physics): 45°.
-pub const SUPPORT_COSINE: f32 = std::f32::consts::FRAC_1_SQRT_2;
+/// contact counts as support (shock propagation, SPEC.md §5.2): 75°. A ball in a pile rests
+/// in grooves whose contacts lie up to ~70° from the vertical; with 45° most of them were
+/// symmetric pairs solved by one Jacobi pass per step and the pile sank into itself. Side
+/// contacts of boxes tilted by less than 15° stay symmetric.
+pub const SUPPORT_COSINE: f32 = 0.258_819_04; // cos 75°
 
 /// The rigid-body cell model: static data shared by every cell computation.
 #[derive(Clone, Debug, PartialEq)]
@@ -175,7 +178,7 @@ impl RigidBodyModel {
 
     /// The support depth of a body that rests on no support at step `t` but is landing on
     /// one (SPEC.md §5.2): within twice its speculative distance (the reach of the next step,
-    /// at step-`t` velocities) of an environment point whose normal is within 45° of `up`
+    /// at step-`t` velocities) of an environment point whose normal is within 75° of `up`
     /// (depth 1), or of a body with depth `k > 0` that would carry it as a support (depth
     /// `k + 1`, the least such). `None` without gravity or if there is no such partner.
     fn landing_depth(&self, own: &Candidate<'_>, candidates: &[Candidate<'_>]) -> Option<u32> {
@@ -276,7 +279,7 @@ impl RigidBodyModel {
     }
 
     /// Shock propagation (SPEC.md §5.2): if the pair of `a` (lower id) and `b` is a support —
-    /// with gravity, a normal within 45° of the vertical, and the lower body resting on a
+    /// with gravity, a normal within 75° of the vertical, and the lower body resting on a
     /// support chain at step `t` (support depth > 0) — the lower body's id. Every other body
     /// contact, in particular two bodies colliding in flight, is a symmetric pair. A pure
     /// function of the pair's step-`t` states, so both bodies classify it alike.
