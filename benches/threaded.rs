@@ -84,8 +84,7 @@ fn main() {
     {
         let config = KernelConfig::new(w)
             .mode(RollbackMode::Cell)
-            .window(window)
-            .record_schedule(false);
+            .window(window);
         let r = run_threaded(
             scene.model(),
             scene.grid(),
