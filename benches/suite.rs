@@ -25,8 +25,8 @@ use criterion::{
     criterion_group, criterion_main, BenchmarkGroup, Criterion, SamplingMode, Throughput,
 };
 use rapier_world::RapierWorld;
-use soda::frame::StatesWanted;
 use soda::exec::virtual_exec::ScheduleSpec;
+use soda::frame::StatesWanted;
 use soda::kernel::{KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;

@@ -82,9 +82,7 @@ fn main() {
         .iter()
         .flat_map(|w| windows.iter().map(move |v| (w, v)))
     {
-        let config = KernelConfig::new(w)
-            .mode(RollbackMode::Cell)
-            .window(window);
+        let config = KernelConfig::new(w).mode(RollbackMode::Cell).window(window);
         let r = run_threaded(
             scene.model(),
             scene.grid(),

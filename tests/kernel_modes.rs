@@ -93,7 +93,14 @@ fn virtual_executor_reproduces_the_reference_snapshots_of_every_builtin_scene() 
             .window(8)
             .partition(PartitionKind::KMeans);
         let options = VirtualOptions::seeded(11);
-        let r = run_virtual(s.model(), s.grid(), s.initial_bodies(), &cfg, &options, steps);
+        let r = run_virtual(
+            s.model(),
+            s.grid(),
+            s.initial_bodies(),
+            &cfg,
+            &options,
+            steps,
+        );
         let got: Vec<String> = r
             .frames
             .iter()
@@ -247,6 +254,7 @@ fn delta_ghosts_under_adversarial_schedules_of_a_landing_pile_commit_the_referen
             .mode(mode)
             .window(16)
             .ghosts(GhostPolicy::Delta);
-        compare(&m, &g, &b, &cfg, &VirtualOptions::seeded(0), &exp).unwrap_or_else(|e| panic!("{mode:?}: {e}"));
+        compare(&m, &g, &b, &cfg, &VirtualOptions::seeded(0), &exp)
+            .unwrap_or_else(|e| panic!("{mode:?}: {e}"));
     }
 }

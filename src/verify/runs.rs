@@ -3,9 +3,9 @@
 use super::report::{Mismatch, RunCheck, RunOutcome, VerifyReport};
 use crate::divergence::first_difference;
 use crate::exec::error::ExecError;
+use crate::exec::virtual_exec::ScheduleSpec;
 use crate::frame::StatesWanted;
 use crate::grid::Grid;
-use crate::exec::virtual_exec::ScheduleSpec;
 use crate::kernel::{GhostPolicy, Input, KernelConfig, PartitionKind, RollbackMode};
 use crate::model::{CellModel, Step};
 use crate::sim::{ExecutorKind, RunOptions, Runner};
