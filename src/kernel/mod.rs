@@ -33,7 +33,7 @@ pub use config::{
     BalanceConfig, GhostPolicy, KernelConfig, LoadSource, PartitionKind, PlantedBug, RollbackMode,
 };
 pub use counters::{BalanceCounters, Counters, WorldCounters};
-pub use message::{Edit, Homed, Input, Message, MessageKey, MessageKind, Sign};
+pub use message::{Edit, EntityEdit, Homed, Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
 pub use trace::{RunTrace, WorldTrace};
 pub use world::World;
