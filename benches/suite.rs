@@ -25,8 +25,9 @@ use criterion::{
     criterion_group, criterion_main, BenchmarkGroup, Criterion, SamplingMode, Throughput,
 };
 use rapier_world::RapierWorld;
+use soda::exec::virtual_exec::ScheduleSpec;
 use soda::frame::StatesWanted;
-use soda::kernel::{KernelConfig, RollbackMode, ScheduleSpec};
+use soda::kernel::{KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 use soda::sim::{run_scene, ExecutorKind, RunOptions};
@@ -47,7 +48,7 @@ fn options(executor: ExecutorKind, kernel: KernelConfig, threads: usize) -> RunO
         executor,
         kernel,
         threads,
-        lead: 0,
+        ..RunOptions::default()
     }
 }
 
@@ -74,12 +75,12 @@ fn suite(c: &mut Criterion) {
     g.finish();
 
     let mut g = group(c, "executors");
-    let fifo = KernelConfig::new(8).schedule(ScheduleSpec::Fifo);
+    let fifo = KernelConfig::new(8);
     let runs = [
         ("reference", reference.clone()),
         (
             "virtual_8_worlds_fifo",
-            options(ExecutorKind::Virtual, fifo, 1),
+            options(ExecutorKind::Virtual, fifo, 1).schedule(ScheduleSpec::Fifo),
         ),
         (
             "threaded_1_thread",
@@ -106,12 +107,10 @@ fn suite(c: &mut Criterion) {
         RollbackMode::World,
         RollbackMode::Conservative,
     ] {
-        let k = KernelConfig::new(8)
-            .mode(mode)
-            .window(16)
+        let k = KernelConfig::new(8).mode(mode).window(16);
+        let o = options(ExecutorKind::Virtual, k, 1)
             .schedule(ScheduleSpec::Seeded(3))
             .record_schedule(false);
-        let o = options(ExecutorKind::Virtual, k, 1);
         g.bench_function(mode.name(), |b| b.iter(|| black_box(run(&gas, &o))));
     }
     g.finish();

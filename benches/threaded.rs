@@ -82,10 +82,7 @@ fn main() {
         .iter()
         .flat_map(|w| windows.iter().map(move |v| (w, v)))
     {
-        let config = KernelConfig::new(w)
-            .mode(RollbackMode::Cell)
-            .window(window)
-            .record_schedule(false);
+        let config = KernelConfig::new(w).mode(RollbackMode::Cell).window(window);
         let r = run_threaded(
             scene.model(),
             scene.grid(),

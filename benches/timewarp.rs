@@ -30,10 +30,10 @@ mod knobs;
 
 use knobs::{env, median, median_ratio};
 use soda::exec::clock::thread_cpu_seconds;
-use soda::exec::virtual_exec::VirtualRun;
+use soda::exec::virtual_exec::{ScheduleSpec, VirtualOptions, VirtualRun};
 use soda::hash::hex;
 use soda::kernel::synthetic::Particles;
-use soda::kernel::{Counters, GhostPolicy, KernelConfig, RollbackMode, ScheduleSpec};
+use soda::kernel::{Counters, GhostPolicy, KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 use soda::ReferenceRun;
@@ -51,8 +51,19 @@ fn reference(scene: &Scene, steps: u64) -> (f64, f64, u64) {
 }
 
 /// Virtual-executor wall time, CPU time (the thread's clock), final hash and counters.
-fn virtual_run(scene: &Scene, cfg: &KernelConfig, steps: u64) -> (f64, f64, u64, Counters) {
-    let (mut r, _) = VirtualRun::new(scene.model(), scene.grid(), scene.initial_bodies(), cfg);
+fn virtual_run(
+    scene: &Scene,
+    cfg: &KernelConfig,
+    schedule: ScheduleSpec,
+    steps: u64,
+) -> (f64, f64, u64, Counters) {
+    let (mut r, _) = VirtualRun::new(
+        scene.model(),
+        scene.grid(),
+        scene.initial_bodies(),
+        cfg,
+        &options(schedule),
+    );
     let (t, c) = (Instant::now(), thread_cpu_seconds());
     let mut hash = 0;
     r.run_with(steps, |f| hash = f.hash);
@@ -72,13 +83,16 @@ fn ghosts() -> GhostPolicy {
     }
 }
 
-fn config(mode: RollbackMode, window: u64, schedule: ScheduleSpec) -> KernelConfig {
+fn config(mode: RollbackMode, window: u64) -> KernelConfig {
     KernelConfig::new(8)
         .mode(mode)
         .window(window)
-        .schedule(schedule)
         .ghosts(ghosts())
-        .record_schedule(false)
+}
+
+/// The virtual executor under `schedule`, decisions not recorded.
+fn options(schedule: ScheduleSpec) -> VirtualOptions {
+    VirtualOptions::new(schedule).record_schedule(false)
 }
 
 fn overhead() {
@@ -87,13 +101,13 @@ fn overhead() {
     let repeats = env("TW_REPEATS", 5, 1).max(1);
     let scene = builtin("falling-cubes", Some(cubes), 0).expect("scene");
     // The reference and the FIFO run alternate `repeats` times; their medians are compared.
-    let fifo = config(RollbackMode::Cell, 16, ScheduleSpec::Fifo);
+    let fifo = config(RollbackMode::Cell, 16);
     let (mut refs, mut fifos) = (Vec::new(), Vec::new());
     let (mut ref_cpu, mut fifo_cpu) = (Vec::new(), Vec::new());
     let (mut hr, mut fifo_counters) = (0, None);
     for k in 0..repeats {
         let (tr, cr, h) = reference(&scene, steps);
-        let (tv, cv, hv, c) = virtual_run(&scene, &fifo, steps);
+        let (tv, cv, hv, c) = virtual_run(&scene, &fifo, ScheduleSpec::Fifo, steps);
         assert_eq!(hv, h, "virtual executor diverged from the reference");
         println!(
             "  pair {k}: reference {tr:.3} s, fifo {tv:.3} s = {:.3}x; CPU {cr:.3} s, {cv:.3} s = {:.3}x",
@@ -143,8 +157,8 @@ fn overhead() {
         median_ratio(&fifos, &refs),
         median_ratio(&fifo_cpu, &ref_cpu)
     );
-    let seeded = config(RollbackMode::Cell, 16, ScheduleSpec::Seeded(1));
-    let (tv, _, hv, c) = virtual_run(&scene, &seeded, steps);
+    let seeded = config(RollbackMode::Cell, 16);
+    let (tv, _, hv, c) = virtual_run(&scene, &seeded, ScheduleSpec::Seeded(1), steps);
     assert_eq!(hv, hr, "virtual executor diverged from the reference");
     report("seeded(1)", tv, &c);
 }
@@ -167,7 +181,7 @@ fn granularity() {
             RollbackMode::Conservative,
         ] {
             let (tv, _, hv, c) =
-                virtual_run(&scene, &config(mode, 16, ScheduleSpec::Seeded(3)), steps);
+                virtual_run(&scene, &config(mode, 16), ScheduleSpec::Seeded(3), steps);
             assert_eq!(hv, hr, "{name} {mode:?} diverged from the reference");
             recomputed.push(c.total.cells_recomputed);
             println!(
@@ -196,8 +210,14 @@ fn log_memory() {
     let cubes = env("TW_CUBES", 8000, 64) as usize;
     let steps = env("TW_LOG_STEPS", 240, 8);
     let scene = builtin("falling-cubes", Some(cubes), 0).expect("scene");
-    let cfg = config(RollbackMode::Cell, 64, ScheduleSpec::Seeded(5));
-    let (mut r, _) = VirtualRun::new(scene.model(), scene.grid(), scene.initial_bodies(), &cfg);
+    let cfg = config(RollbackMode::Cell, 64);
+    let (mut r, _) = VirtualRun::new(
+        scene.model(),
+        scene.grid(),
+        scene.initial_bodies(),
+        &cfg,
+        &options(ScheduleSpec::Seeded(5)),
+    );
     println!("log memory: falling-cubes {cubes}, 8 worlds, cell, W64, seeded(5)");
     r.set_horizon(steps + 64);
     let chunk = (steps / 8).max(1);
@@ -232,8 +252,8 @@ fn log_flatness() {
     let n = env("TW_PARTICLES", 2000, 50) as usize;
     let steps = env("TW_FLAT_STEPS", 10_000, 40);
     let (m, g, b) = Particles::scene(n, [16, 8, 16], false, 1);
-    let cfg = config(RollbackMode::Cell, 64, ScheduleSpec::Seeded(5));
-    let (mut r, _) = VirtualRun::new(m, g, b, &cfg);
+    let cfg = config(RollbackMode::Cell, 64);
+    let (mut r, _) = VirtualRun::new(m, g, b, &cfg, &options(ScheduleSpec::Seeded(5)));
     r.set_horizon(steps + 64);
     println!(
         "log flatness: {n} synthetic particles in 16x8x16 cells, 8 worlds, cell, W64, seeded(5)"

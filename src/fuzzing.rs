@@ -23,7 +23,7 @@
 //! ```
 
 use crate::exec::reference::ReferenceRun;
-use crate::exec::virtual_exec::VirtualRun;
+use crate::exec::virtual_exec::{ScheduleSpec, VirtualOptions, VirtualRun};
 use crate::frame::Frame;
 use crate::grid::Grid;
 use crate::kernel::synthetic::Particles;
@@ -66,7 +66,7 @@ pub struct SyncOrderInput {
     pub partition_seed: u8,
     /// Steps to commit: 5–30 for particles, 5–20 for the rigid-body scenes.
     pub steps: u8,
-    /// The scheduler's bytes ([`crate::kernel::ScheduleSpec::Bytes`]): each decision
+    /// The scheduler's bytes ([`ScheduleSpec::Bytes`]): each decision
     /// consumes one byte (two when more than 256 choices are open), then the deterministic
     /// FIFO fallback takes over.
     pub schedule: Vec<u8>,
@@ -147,8 +147,11 @@ pub struct SyncOrderCase {
     pub scene: FuzzScene,
     /// Steps to commit.
     pub steps: u64,
-    /// The kernel configuration (schedule `Bytes(input.schedule)`, decisions recorded).
+    /// The kernel configuration.
     pub config: KernelConfig,
+    /// The virtual executor's options (for an input: schedule `Bytes(input.schedule)`,
+    /// decisions recorded).
+    pub options: VirtualOptions,
 }
 
 impl SyncOrderInput {
@@ -220,14 +223,13 @@ impl SyncOrderInput {
             .mode(mode)
             .window(1 + u64::from(self.window % 16))
             .partition(partition)
-            .partition_seed(u64::from(self.partition_seed))
-            .schedule(crate::kernel::ScheduleSpec::Bytes(self.schedule.clone()))
-            .record_schedule(true);
+            .partition_seed(u64::from(self.partition_seed));
         config.planted_bug = bug;
         SyncOrderCase {
             scene,
             steps,
             config,
+            options: VirtualOptions::new(ScheduleSpec::Bytes(self.schedule.clone())),
         }
     }
 }
@@ -264,25 +266,25 @@ pub fn check_case(case: &SyncOrderCase) -> Result<(), SyncOrderError> {
     }
 }
 
-/// A kernel configuration and a step count from fuzz bytes, for fuzzing the
-/// synchronisation order of *any* model ([`check_model_sync_order`]): six header bytes
-/// (worlds 1–8, rollback mode, window 1–16, partitioner, partition seed, steps
-/// 1–`max_steps`), then the bytes that drive every decision of the virtual executor.
-/// `None` if fewer than six bytes.
+/// A case of [`FuzzScene::Custom`] from fuzz bytes, for fuzzing the synchronisation order
+/// of *any* model ([`check_model_sync_order`]): six header bytes give the kernel
+/// configuration and the step count (worlds 1–8, rollback mode, window 1–16, partitioner,
+/// partition seed, steps 1–`max_steps`), the rest drive every decision of the virtual
+/// executor (its schedule, decisions recorded). `None` if fewer than six bytes.
 ///
 /// A cargo-fuzz target for your own model is then a few lines (see `fuzz/README.md`):
 ///
 /// ```
-/// use soda::fuzzing::{check_model_sync_order, fuzz_config};
+/// use soda::fuzzing::{check_model_sync_order, fuzz_case};
 /// use soda::kernel::synthetic::Particles;
 ///
 /// let data = [3u8, 0, 5, 2, 9, 12, 250, 3, 7, 1];
-/// if let Some((config, steps)) = fuzz_config(&data, 20) {
+/// if let Some(case) = fuzz_case(&data, 20) {
 ///     let (model, grid, initial) = Particles::scene(24, [4, 2, 2], false, 1);
-///     check_model_sync_order(model, grid, initial, &config, steps).unwrap();
+///     check_model_sync_order(model, grid, initial, &case).unwrap();
 /// }
 /// ```
-pub fn fuzz_config(bytes: &[u8], max_steps: u64) -> Option<(KernelConfig, u64)> {
+pub fn fuzz_case(bytes: &[u8], max_steps: u64) -> Option<SyncOrderCase> {
     let [worlds, mode, window, partition, partition_seed, steps] = *bytes.get(..6)? else {
         return None;
     };
@@ -301,18 +303,22 @@ pub fn fuzz_config(bytes: &[u8], max_steps: u64) -> Option<(KernelConfig, u64)> 
         .mode(mode)
         .window(1 + u64::from(window % 16))
         .partition(partition)
-        .partition_seed(u64::from(partition_seed))
-        .schedule(crate::kernel::ScheduleSpec::Bytes(bytes[6..].to_vec()))
-        .record_schedule(true);
-    Some((config, 1 + u64::from(steps) % max_steps.max(1)))
+        .partition_seed(u64::from(partition_seed));
+    Some(SyncOrderCase {
+        scene: FuzzScene::Custom,
+        steps: 1 + u64::from(steps) % max_steps.max(1),
+        config,
+        options: VirtualOptions::new(ScheduleSpec::Bytes(bytes[6..].to_vec())),
+    })
 }
 
-/// Runs `model` from `initial` for `steps` steps in the reference executor and in the
-/// virtual executor under `config` (whose schedule drives the synchronisation order), and
-/// compares every committed frame (step, hash, entity count, events). On a mismatch the
-/// error names the first differing step, both hashes, the configuration and the schedule
-/// string that replays the run. Works for any model: the public face of the `sync_order`
-/// fuzz target.
+/// Runs `model` from `initial` for `case.steps` steps in the reference executor and in the
+/// virtual executor under `case.config` and `case.options` (whose schedule drives the
+/// synchronisation order), and compares every committed frame (step, hash, entity count,
+/// events); `case.scene` is not looked at (the model and states are these). On a mismatch
+/// the error names the first differing step, both hashes, the configuration and the
+/// schedule string that replays the run. Works for any model: the public face of the
+/// `sync_order` fuzz target.
 ///
 /// # Panics
 /// If the kernel itself panics (a locality violation it detects, a deadlock): that is a
@@ -321,19 +327,9 @@ pub fn check_model_sync_order<M: CellModel + Clone>(
     model: M,
     grid: Grid,
     initial: Vec<M::State>,
-    config: &KernelConfig,
-    steps: u64,
+    case: &SyncOrderCase,
 ) -> Result<(), SyncOrderError> {
-    compare(
-        model,
-        grid,
-        initial,
-        &SyncOrderCase {
-            scene: FuzzScene::Custom,
-            steps,
-            config: config.clone(),
-        },
-    )
+    compare(model, grid, initial, case)
 }
 
 fn compare<M: CellModel + Clone>(
@@ -344,7 +340,7 @@ fn compare<M: CellModel + Clone>(
 ) -> Result<(), SyncOrderError> {
     let (mut reference, _) = ReferenceRun::new(model.clone(), grid.clone(), bodies.clone());
     let expected: Vec<Frame<M::Event>> = (0..case.steps).map(|_| reference.advance()).collect();
-    let (mut run, _) = VirtualRun::new(model, grid, bodies, &case.config);
+    let (mut run, _) = VirtualRun::new(model, grid, bodies, &case.config, &case.options);
     let frames = run.run(case.steps);
     let c = &case.config;
     let case_text = format!(

@@ -72,8 +72,9 @@
 //!   [`models`]: example models built on that seam only;
 //! - [`kernel`]: the pure, single-threaded Time Warp protocol (worlds, messages, GVT,
 //!   balancing);
-//! - [`exec`]: executors — the single-threaded reference, the virtual executor (one thread,
-//!   a seeded replayable schedule) and the threaded one (the only module that starts
+//! - [`exec`]: executors, each with its own options beside the kernel's configuration — the
+//!   single-threaded reference, the virtual executor (one thread, a seeded replayable
+//!   schedule) and the threaded one (the only module that starts
 //!   threads), the contract checker, run control and errors;
 //! - [`sim`], [`verify`](mod@verify), [`fuzzing`], [`divergence`], [`scaling`]: running a
 //!   model and checking it;
@@ -107,6 +108,7 @@ pub mod verify;
 pub mod prelude {
     pub use crate::exec::control::RunControl;
     pub use crate::exec::error::{ContractRule, ContractViolation, ExecError, InputError};
+    pub use crate::exec::virtual_exec::{ScheduleSpec, VirtualOptions};
     pub use crate::frame::{Event, Frame, LeftGrid, StatesWanted};
     pub use crate::grid::{CellCoord, Grid};
     pub use crate::hash::StateHash;

@@ -3,9 +3,9 @@
 //! without changing a single committed bit; the trace agrees with the counters.
 
 use soda::exec::threaded::run_threaded;
-use soda::exec::virtual_exec::VirtualRun;
+use soda::exec::virtual_exec::{VirtualOptions, VirtualRun};
 use soda::kernel::trace::RollbackCause;
-use soda::kernel::{Counters, KernelConfig, RollbackMode, ScheduleSpec, WorldCounters};
+use soda::kernel::{Counters, KernelConfig, RollbackMode, WorldCounters};
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
 
@@ -43,12 +43,22 @@ fn assert_counters(c: &Counters, what: &str) {
     assert_adds_up(&c.total, &format!("{what}, total"));
 }
 
+/// A virtual run of `scene` under `cfg` with schedule seed `seed`: its committed hashes and
+/// the run.
 fn virtual_run(
     scene: &Scene,
     cfg: &KernelConfig,
+    seed: u64,
     steps: u64,
 ) -> (Vec<u64>, VirtualRun<soda::RigidBodyModel>) {
-    let (mut run, _) = VirtualRun::new(scene.model(), scene.grid(), scene.initial_bodies(), cfg);
+    let options = VirtualOptions::seeded(seed);
+    let (mut run, _) = VirtualRun::new(
+        scene.model(),
+        scene.grid(),
+        scene.initial_bodies(),
+        cfg,
+        &options,
+    );
     let hashes = run.run(steps).iter().map(|f| f.hash).collect();
     (hashes, run)
 }
@@ -59,11 +69,8 @@ fn committed_plus_rolled_back_equals_computed_on_the_virtual_executor() {
     for scene in scenes() {
         for mode in MODES {
             for seed in 0..3 {
-                let cfg = KernelConfig::new(6)
-                    .mode(mode)
-                    .window(8)
-                    .schedule(ScheduleSpec::Seeded(seed));
-                let (_, run) = virtual_run(&scene, &cfg, 40);
+                let cfg = KernelConfig::new(6).mode(mode).window(8);
+                let (_, run) = virtual_run(&scene, &cfg, seed, 40);
                 let c = run.counters();
                 assert_counters(&c, &format!("{} {mode:?} seed {seed}", scene.name));
                 assert_eq!(c.total.steps_committed, 40 * c.worlds.len() as u64);
@@ -97,12 +104,9 @@ fn committed_plus_rolled_back_equals_computed_on_the_threaded_executor() {
 fn tracing_does_not_change_the_committed_hashes() {
     for scene in scenes() {
         for mode in MODES {
-            let cfg = KernelConfig::new(5)
-                .mode(mode)
-                .window(6)
-                .schedule(ScheduleSpec::Seeded(11));
-            let (plain, _) = virtual_run(&scene, &cfg, 40);
-            let (traced, _) = virtual_run(&scene, &cfg.clone().trace(true), 40);
+            let cfg = KernelConfig::new(5).mode(mode).window(6);
+            let (plain, _) = virtual_run(&scene, &cfg, 11, 40);
+            let (traced, _) = virtual_run(&scene, &cfg.clone().trace(true), 11, 40);
             assert_eq!(plain, traced, "{} {mode:?} virtual", scene.name);
             let threaded = |cfg: &KernelConfig| {
                 run_threaded(
@@ -136,9 +140,8 @@ fn the_trace_agrees_with_the_counters() {
     let cfg = KernelConfig::new(6)
         .mode(RollbackMode::Cell)
         .window(8)
-        .schedule(ScheduleSpec::Seeded(4))
         .trace(true);
-    let (_, mut run) = virtual_run(&scene, &cfg, 60);
+    let (_, mut run) = virtual_run(&scene, &cfg, 4, 60);
     let c = run.counters();
     let t = run.take_trace();
     assert!(c.total.rollbacks() > 0, "the schedule produced rollbacks");

@@ -6,11 +6,11 @@ mod kernel_support;
 
 use kernel_support::{case, particle_scene, property_with, reference, rigid_scene, Case};
 use proptest::prelude::*;
-use soda::exec::virtual_exec::{parse_schedule, VirtualRun};
+use soda::exec::virtual_exec::{parse_schedule, VirtualOptions, VirtualRun};
 use soda::kernel::balance::territory::components;
 use soda::kernel::synthetic::{Particle, Particles};
 use soda::kernel::{
-    BalanceConfig, KernelConfig, LoadSource, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
+    BalanceConfig, KernelConfig, LoadSource, PartitionKind, PlantedBug, RollbackMode,
 };
 use soda::Grid;
 
@@ -61,7 +61,7 @@ proptest! {
     #[test]
     fn random_balancing_decisions_never_change_a_committed_hash((c, b) in balanced_case()) {
         let config = c.config(PlantedBug::None).balance(b);
-        let r = property_with(&c, &config);
+        let r = property_with(&c, &config, &c.options());
         prop_assert!(r.is_ok(), "{}", r.unwrap_err());
     }
 }
@@ -77,13 +77,14 @@ fn crowded_corner() -> (Particles, Grid, Vec<Particle>) {
 
 fn run_virtual(
     config: &KernelConfig,
+    options: &VirtualOptions,
     steps: u64,
 ) -> (
     VirtualRun<Particles>,
     Vec<soda::Frame<soda::kernel::synthetic::ParticleEvent>>,
 ) {
     let (m, g, b) = crowded_corner();
-    let (mut run, _) = VirtualRun::new(m, g, b, config);
+    let (mut run, _) = VirtualRun::new(m, g, b, config, options);
     let frames = run.run(steps);
     (run, frames)
 }
@@ -93,10 +94,8 @@ fn seeded_decisions_move_cells_and_fight_famine_with_reference_hashes() {
     let (m, g, b) = crowded_corner();
     let expected = reference(&m, &g, &b, 80);
     for seed in 0..4 {
-        let config = KernelConfig::new(6)
-            .schedule(ScheduleSpec::Seeded(seed))
-            .balance(seeded(5, seed, 1, 16));
-        let (run, frames) = run_virtual(&config, 80);
+        let config = KernelConfig::new(6).balance(seeded(5, seed, 1, 16));
+        let (run, frames) = run_virtual(&config, &VirtualOptions::seeded(seed), 80);
         assert_eq!(frames, expected, "seed {seed}");
         let c = run.counters().balance;
         assert_eq!(
@@ -132,10 +131,8 @@ fn a_world_whose_bodies_all_leave_fights_famine_and_gets_work_again() {
     let (m, g, b) = marching_particles();
     let steps = 120;
     let expected = reference(&m, &g, &b, steps);
-    let config = KernelConfig::new(4)
-        .schedule(ScheduleSpec::Seeded(3))
-        .balance(proxy_balance(5));
-    let (mut run, _) = VirtualRun::new(m, g, b, &config);
+    let config = KernelConfig::new(4).balance(proxy_balance(5));
+    let (mut run, _) = VirtualRun::new(m, g, b, &config, &VirtualOptions::seeded(3));
     let frames = run.run(steps);
     assert_eq!(frames, expected);
     let rounds = run.balance_history();
@@ -158,19 +155,19 @@ fn a_world_whose_bodies_all_leave_fights_famine_and_gets_work_again() {
 
 #[test]
 fn balancing_decisions_replay_from_the_schedule_seed_and_string() {
-    let run = |config: &KernelConfig| {
+    let config = KernelConfig::new(5)
+        .partition(PartitionKind::KMeans)
+        .balance(proxy_balance(4));
+    let run = |options: &VirtualOptions| {
         let (m, g, b) = marching_particles();
-        let (mut r, _) = VirtualRun::new(m, g, b, config);
+        let (mut r, _) = VirtualRun::new(m, g, b, &config, options);
         let frames = r.run(80);
         (frames, r.balance_history().to_vec(), r.schedule_string())
     };
-    let config = KernelConfig::new(5)
-        .partition(PartitionKind::KMeans)
-        .schedule(ScheduleSpec::Seeded(11))
-        .balance(proxy_balance(4));
-    let (frames, rounds, schedule) = run(&config);
+    let options = VirtualOptions::seeded(11);
+    let (frames, rounds, schedule) = run(&options);
     assert!(rounds.iter().any(|r| r.cells_moved > 0), "no cell moved");
-    let (frames2, rounds2, _) = run(&config);
+    let (frames2, rounds2, _) = run(&options);
     assert_eq!(
         (&frames, &rounds),
         (&frames2, &rounds2),
@@ -180,9 +177,7 @@ fn balancing_decisions_replay_from_the_schedule_seed_and_string() {
         rs.iter().map(|r| r.owners.clone()).collect()
     };
     assert_eq!(owners(&rounds), owners(&rounds2));
-    let replay = config
-        .clone()
-        .schedule(parse_schedule(&schedule).expect("schedule string"));
+    let replay = options.schedule(parse_schedule(&schedule).expect("schedule string"));
     let (frames3, rounds3, _) = run(&replay);
     assert_eq!(
         (&frames, &rounds),
@@ -202,9 +197,9 @@ fn territories_never_split_into_more_pieces() {
     ] {
         let config = KernelConfig::new(6)
             .mode(mode)
-            .schedule(ScheduleSpec::Seeded(seed))
             .balance(seeded(4, seed, 0, 24));
-        let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &config);
+        let options = VirtualOptions::seeded(seed);
+        let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &config, &options);
         run.run(60);
         let mut before = run_initial_owners(&g, &config);
         let mut moved = 0;

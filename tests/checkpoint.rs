@@ -80,6 +80,90 @@ fn resume_without_executor_options_continues_on_the_checkpointed_executor() {
     assert_eq!(hash_of(&resumed), whole);
 }
 
+/// A checkpoint's text with its document rewritten by `edit` and its checksum made to match.
+fn rewritten(text: &str, edit: impl FnOnce(&mut serde_json::Value)) -> String {
+    let (first, rest) = text.split_once('\n').unwrap();
+    let body_end = rest.trim_end_matches('\n').rfind('\n').unwrap() + 1;
+    let mut doc: serde_json::Value = serde_json::from_str(&rest[..body_end]).unwrap();
+    edit(&mut doc);
+    let content = format!("{first}\n{doc}\n");
+    let mut fnv: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in content.as_bytes() {
+        fnv = (fnv ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{content}checksum {fnv:016x}\n")
+}
+
+/// The summary lines of the kernel's counters (they depend on the virtual schedule).
+fn counter_lines(summary: &str) -> Vec<&str> {
+    summary
+        .lines()
+        .filter(|l| {
+            let label = l.split_whitespace().next().unwrap_or("");
+            ["efficiency", "rollbacks", "messages"].contains(&label)
+        })
+        .collect()
+}
+
+#[test]
+fn a_checkpoint_written_with_the_schedule_inside_the_kernel_configuration_resumes_with_it() {
+    // Checkpoints written before the virtual executor's schedule left `KernelConfig` hold it
+    // as `run.options.kernel.schedule` (and `record_schedule`): such a file resumes on the
+    // same schedule, so the same counters, as the file written today.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("gas.ckpt");
+    let scene = ["--scene", "sparse-gas", "--objects", "150"];
+    let whole = hash_of(&ok(&[&["run"], &scene[..], &["--steps", "80"]].concat()));
+    let virtual_run = [
+        "--executor",
+        "virtual",
+        "--worlds",
+        "5",
+        "--schedule-seed",
+        "7",
+    ];
+    ok(&[
+        &["run"],
+        &scene[..],
+        &virtual_run[..],
+        &["--steps", "40", "--checkpoint", s(&file)],
+    ]
+    .concat());
+    let text = std::fs::read_to_string(&file).unwrap();
+    assert!(text.contains("\"schedule\":{\"seeded\":7}"), "{text}");
+    let resume = |name: &str, contents: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, contents).unwrap();
+        let out = ok(&["resume", s(&path), "--steps", "80"]);
+        assert_eq!(hash_of(&out), whole, "{name}:\n{out}");
+        out
+    };
+    let today = resume("today.ckpt", &text);
+    let older = resume(
+        "older.ckpt",
+        &rewritten(&text, |doc| {
+            let options = doc["run"]["options"].as_object_mut().unwrap();
+            let schedule = options.remove("schedule").unwrap();
+            let record = options.remove("record_schedule").unwrap();
+            options["kernel"]["schedule"] = schedule;
+            options["kernel"]["record_schedule"] = record;
+        }),
+    );
+    assert!(!counter_lines(&today).is_empty(), "{today}");
+    assert_eq!(counter_lines(&older), counter_lines(&today));
+    // Without any schedule in the file the run resumes on seed 0: other counters.
+    let seedless = resume(
+        "seedless.ckpt",
+        &rewritten(&text, |doc| {
+            doc["run"]["options"]
+                .as_object_mut()
+                .unwrap()
+                .remove("schedule");
+        }),
+    );
+    assert_ne!(counter_lines(&seedless), counter_lines(&today));
+}
+
 /// When a run is killed.
 #[derive(Clone, Copy, Debug)]
 enum KillAt {

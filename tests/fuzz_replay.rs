@@ -101,7 +101,7 @@ fn planted_bug_is_caught_on_a_saved_seed(bug: PlantedBug, name: &str) {
         assert!(e.to_string().contains("first divergence at step"), "{e}");
         let replay = e.schedule().expect("a replay string");
         let mut case = input.case(bug);
-        case.config.schedule = parse_schedule(replay).expect("a replay string");
+        case.options.schedule = parse_schedule(replay).expect("a replay string");
         assert!(
             check_case(&case).is_err(),
             "{}: the printed schedule does not replay the divergence",
@@ -131,15 +131,15 @@ fn planted_bug_cutoff_by_ids_only_is_caught_by_a_saved_sync_order_seed() {
 /// configurations and schedules, commits the reference's frames.
 #[test]
 fn the_generic_sync_order_check_runs_a_users_model() {
-    use soda::fuzzing::{check_model_sync_order, fuzz_config};
+    use soda::fuzzing::{check_model_sync_order, fuzz_case};
     use soda::models::epidemic::Epidemic;
     for seed in 0u8..12 {
         let bytes: Vec<u8> = (0..64u8)
             .map(|k| k.wrapping_mul(37).wrapping_add(seed.wrapping_mul(11)))
             .collect();
-        let (config, steps) = fuzz_config(&bytes, 25).expect("long enough");
+        let case = fuzz_case(&bytes, 25).expect("long enough");
         let (model, grid, initial) = Epidemic::default().scene(60, 6, [4, 2, 3], u64::from(seed));
-        if let Err(e) = check_model_sync_order(model, grid, initial, &config, steps) {
+        if let Err(e) = check_model_sync_order(model, grid, initial, &case) {
             panic!("{e}");
         }
     }

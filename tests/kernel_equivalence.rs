@@ -57,9 +57,9 @@ fn planted_bug_fails(bug: PlantedBug) -> bool {
             let replay = msg.split("): ").last().unwrap().trim();
             let schedule = parse_schedule(replay).expect("a replay string");
             let mut replayed = case.clone();
-            let cfg = case.config(bug).schedule(schedule);
+            let cfg = case.config(bug);
             replayed.schedule_seed = 0;
-            let again = property_with(&replayed, &cfg);
+            let again = property_with(&replayed, &cfg, &case.options().schedule(schedule));
             assert!(again.is_err(), "the printed schedule replays the failure");
             true
         }

@@ -7,9 +7,9 @@
 //! here because `ReferenceRun` has no input API; the synthetic model uses the step number only
 //! for event labels, so hashes and body counts are compared, not events.
 
-use soda::exec::virtual_exec::VirtualRun;
+use soda::exec::virtual_exec::{VirtualOptions, VirtualRun};
 use soda::kernel::synthetic::{Particle, Particles};
-use soda::kernel::{Edit, Input, KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::kernel::{Edit, Input, KernelConfig, PartitionKind, RollbackMode};
 use soda::prelude::{ExecError, InputError, RunOptions, Runner};
 use soda::{Grid, ReferenceRun};
 
@@ -122,9 +122,9 @@ fn scripted_inputs_commit_like_the_reference_applying_them() {
                 } else {
                     PartitionKind::Blocks
                 })
-                .partition_seed(seed)
-                .schedule(ScheduleSpec::Seeded(seed));
-            let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg);
+                .partition_seed(seed);
+            let options = VirtualOptions::seeded(seed);
+            let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg, &options);
             for (t, i) in &inputs {
                 run.add_input(*t, i.clone());
             }
@@ -144,9 +144,9 @@ fn inputs_injected_during_the_run_are_stragglers_that_roll_back_and_commit_corre
                 .mode(mode)
                 .window(8)
                 .partition(PartitionKind::Random)
-                .partition_seed(seed)
-                .schedule(ScheduleSpec::Seeded(seed));
-            let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg);
+                .partition_seed(seed);
+            let options = VirtualOptions::seeded(seed);
+            let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg, &options);
             run.set_horizon(30);
             let mut got: Vec<(u64, usize)> =
                 run.run(10).iter().map(|f| (f.hash, f.bodies)).collect();

@@ -7,10 +7,12 @@
 mod kernel_support;
 
 use kernel_support::{compare, reference};
-use soda::exec::virtual_exec::{parse_schedule, run_virtual, VirtualRun};
+use soda::exec::virtual_exec::{
+    parse_schedule, run_virtual, ScheduleSpec, VirtualOptions, VirtualRun,
+};
 use soda::hash::hex;
 use soda::kernel::synthetic::Particles;
-use soda::kernel::{GhostPolicy, KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::kernel::{GhostPolicy, KernelConfig, PartitionKind, RollbackMode};
 use soda::scene::builtin::builtin;
 
 #[test]
@@ -28,9 +30,8 @@ fn conservative_never_rolls_back() {
                 let cfg = KernelConfig::new(worlds)
                     .mode(RollbackMode::Conservative)
                     .partition(part.clone())
-                    .window(window)
-                    .schedule(ScheduleSpec::Seeded(seed));
-                let c = compare(&m, &g, &b, &cfg, &exp).unwrap();
+                    .window(window);
+                let c = compare(&m, &g, &b, &cfg, &VirtualOptions::seeded(seed), &exp).unwrap();
                 assert_eq!(c.total.rollbacks(), 0);
                 assert_eq!(c.total.cells_recomputed, 0);
                 assert_eq!(c.total.anti_messages_sent, 0);
@@ -47,14 +48,10 @@ fn cell_recomputes_fewer_cell_steps_than_world_on_the_same_schedules_of_sparse_g
     let exp = reference(&m, &g, &b, 60);
     let (mut cell, mut world) = (0, 0);
     for seed in 0..4 {
-        let cfg = |mode| {
-            KernelConfig::new(8)
-                .mode(mode)
-                .window(16)
-                .schedule(ScheduleSpec::Seeded(seed))
-        };
-        let c = compare(&m, &g, &b, &cfg(RollbackMode::Cell), &exp).unwrap();
-        let w = compare(&m, &g, &b, &cfg(RollbackMode::World), &exp).unwrap();
+        let cfg = |mode| KernelConfig::new(8).mode(mode).window(16);
+        let options = VirtualOptions::seeded(seed);
+        let c = compare(&m, &g, &b, &cfg(RollbackMode::Cell), &options, &exp).unwrap();
+        let w = compare(&m, &g, &b, &cfg(RollbackMode::World), &options, &exp).unwrap();
         cell += c.total.cells_recomputed;
         world += w.total.cells_recomputed;
     }
@@ -94,9 +91,16 @@ fn virtual_executor_reproduces_the_reference_snapshots_of_every_builtin_scene() 
         let steps = 150;
         let cfg = KernelConfig::new(4)
             .window(8)
-            .partition(PartitionKind::KMeans)
-            .schedule(ScheduleSpec::Seeded(11));
-        let r = run_virtual(s.model(), s.grid(), s.initial_bodies(), &cfg, steps);
+            .partition(PartitionKind::KMeans);
+        let options = VirtualOptions::seeded(11);
+        let r = run_virtual(
+            s.model(),
+            s.grid(),
+            s.initial_bodies(),
+            &cfg,
+            &options,
+            steps,
+        );
         let got: Vec<String> = r
             .frames
             .iter()
@@ -119,14 +123,12 @@ fn a_printed_schedule_replays_exactly() {
     let (m, g, b) = Particles::scene(40, [4, 3, 2], true, 5);
     let cfg = KernelConfig::new(6)
         .window(6)
-        .partition(PartitionKind::Random)
-        .schedule(ScheduleSpec::Seeded(99));
-    let first = run_virtual(m.clone(), g.clone(), b.clone(), &cfg, 30);
+        .partition(PartitionKind::Random);
+    let options = VirtualOptions::seeded(99);
+    let first = run_virtual(m.clone(), g.clone(), b.clone(), &cfg, &options, 30);
     assert!(first.counters.total.rollbacks() > 0);
-    let replay = cfg
-        .clone()
-        .schedule(parse_schedule(&first.schedule).unwrap());
-    let second = run_virtual(m, g, b, &replay, 30);
+    let replay = options.schedule(parse_schedule(&first.schedule).unwrap());
+    let second = run_virtual(m, g, b, &cfg, &replay, 30);
     assert_eq!(first.frames, second.frames);
     assert_eq!(first.counters, second.counters);
     assert_eq!(first.schedule, second.schedule);
@@ -179,9 +181,8 @@ fn a_late_migration_across_a_border_commits_like_the_reference_under_any_schedul
             let cfg = KernelConfig::new(2)
                 .mode(mode)
                 .window(1 + seed % 9)
-                .partition(PartitionKind::Explicit(vec![0, 0, 0, 1, 1, 1]))
-                .schedule(ScheduleSpec::Seeded(seed));
-            compare(&m, &g, &b, &cfg, &exp).unwrap();
+                .partition(PartitionKind::Explicit(vec![0, 0, 0, 1, 1, 1]));
+            compare(&m, &g, &b, &cfg, &VirtualOptions::seeded(seed), &exp).unwrap();
         }
     }
 }
@@ -192,11 +193,9 @@ fn fifo_schedule_applies_all_news_before_computing_so_never_rolls_back() {
     let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());
     let exp = reference(&m, &g, &b, 40);
     for mode in [RollbackMode::Cell, RollbackMode::World] {
-        let cfg = KernelConfig::new(8)
-            .mode(mode)
-            .window(16)
-            .schedule(ScheduleSpec::Fifo);
-        let c = compare(&m, &g, &b, &cfg, &exp).unwrap();
+        let cfg = KernelConfig::new(8).mode(mode).window(16);
+        let fifo = VirtualOptions::new(ScheduleSpec::Fifo);
+        let c = compare(&m, &g, &b, &cfg, &fifo, &exp).unwrap();
         assert_eq!(c.total.rollbacks(), 0);
         assert_eq!(c.total.cells_recomputed, 0);
     }
@@ -213,10 +212,8 @@ fn delta_ghosts_send_nothing_for_a_resting_border_and_commit_the_same_bits() {
     let mut ghosts = Vec::new();
     for policy in [GhostPolicy::Full, GhostPolicy::Delta] {
         for seed in 0..3 {
-            let cfg = KernelConfig::new(4)
-                .ghosts(policy)
-                .schedule(ScheduleSpec::Seeded(seed));
-            let c = compare(&m, &g, &b, &cfg, &exp)
+            let cfg = KernelConfig::new(4).ghosts(policy);
+            let c = compare(&m, &g, &b, &cfg, &VirtualOptions::seeded(seed), &exp)
                 .unwrap_or_else(|e| panic!("{policy:?} seed {seed}: {e}"));
             ghosts.push((policy, c.total.ghosts_sent));
         }
@@ -228,8 +225,9 @@ fn delta_ghosts_send_nothing_for_a_resting_border_and_commit_the_same_bits() {
         "delta ghosts {delta} not under half of full ghosts {full}"
     );
     // Once everything sleeps, a delta world sends no ghost at all.
-    let cfg = KernelConfig::new(4).schedule(ScheduleSpec::Fifo);
-    let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg);
+    let cfg = KernelConfig::new(4);
+    let fifo = VirtualOptions::new(ScheduleSpec::Fifo);
+    let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg, &fifo);
     run.run(240);
     let before = run.counters().total.ghosts_sent;
     let frames = run.run(60);
@@ -255,8 +253,8 @@ fn delta_ghosts_under_adversarial_schedules_of_a_landing_pile_commit_the_referen
         let cfg = KernelConfig::new(8)
             .mode(mode)
             .window(16)
-            .ghosts(GhostPolicy::Delta)
-            .schedule(ScheduleSpec::Seeded(0));
-        compare(&m, &g, &b, &cfg, &exp).unwrap_or_else(|e| panic!("{mode:?}: {e}"));
+            .ghosts(GhostPolicy::Delta);
+        compare(&m, &g, &b, &cfg, &VirtualOptions::seeded(0), &exp)
+            .unwrap_or_else(|e| panic!("{mode:?}: {e}"));
     }
 }

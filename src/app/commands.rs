@@ -2,7 +2,8 @@
 //! experiment. They print to stdout and return `anyhow` errors naming the fix.
 
 use super::registry::{ModelSize, RegisteredModel};
-use crate::kernel::{KernelConfig, RollbackMode, ScheduleSpec};
+use crate::exec::virtual_exec::ScheduleSpec;
+use crate::kernel::{KernelConfig, RollbackMode};
 use crate::sim::{ModelReport, RunOptions};
 use crate::verify::{RunOutcome, VerifyOptions};
 use anyhow::{bail, Result};
@@ -191,14 +192,9 @@ pub fn granularity(
             let (mut computed, mut recomputed, mut rollbacks, mut eff) = (0u64, 0u64, 0u64, 0.0);
             let mut hash = String::new();
             for seed in 0..seeds {
-                let options = RunOptions::virtual_exec(
-                    kernel
-                        .clone()
-                        .mode(mode)
-                        .window(window)
-                        .schedule(ScheduleSpec::Seeded(seed))
-                        .record_schedule(false),
-                );
+                let options = RunOptions::virtual_exec(kernel.clone().mode(mode).window(window))
+                    .schedule(ScheduleSpec::Seeded(seed))
+                    .record_schedule(false);
                 let r = model.run(size, &options, steps)?;
                 let k = r.kernel.expect("a virtual run has kernel counters");
                 computed += k.counters.total.cells_computed;

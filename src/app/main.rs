@@ -238,7 +238,7 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                 executor,
                 kernel: a.kernel.config()?.mode(parse_mode(&a.mode)?),
                 threads: threads(a.threads),
-                lead: 0,
+                ..RunOptions::default()
             };
             let checkpoint = match &a.checkpoint {
                 Some(path) => Some(super::checkpoint::CheckpointPlan::checked(

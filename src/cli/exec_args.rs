@@ -4,9 +4,9 @@
 use super::numbers::whole;
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
-use soda::exec::virtual_exec::parse_schedule;
+use soda::exec::virtual_exec::{parse_schedule, ScheduleSpec};
 use soda::kernel::{
-    BalanceConfig, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
+    BalanceConfig, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode,
 };
 use soda::sim::{ExecutorKind, RunOptions};
 
@@ -283,9 +283,7 @@ impl ExecutorArgs {
             .window(self.window.unwrap_or(16))
             .partition(partition)
             .partition_seed(self.partition_seed.unwrap_or(0))
-            .schedule(schedule)
-            .ghosts(self.ghosts.map_or(GhostPolicy::Delta, Into::into))
-            .record_schedule(false);
+            .ghosts(self.ghosts.map_or(GhostPolicy::Delta, Into::into));
         kernel.planted_bug = self.planted_bug.map_or(PlantedBug::None, Into::into);
         kernel.balance = self.balance_config()?;
         Ok(RunOptions {
@@ -293,6 +291,8 @@ impl ExecutorArgs {
             kernel,
             threads,
             lead: self.lead.unwrap_or(0),
+            schedule,
+            record_schedule: false,
         })
     }
 }

@@ -11,9 +11,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use soda::app::charts;
 use soda::exec::reference::ReferenceRun;
+use soda::exec::virtual_exec::ScheduleSpec;
 use soda::frame::StatesWanted;
 use soda::kernel::trace::RunTrace;
-use soda::kernel::{KernelConfig, Partition, PartitionKind, RollbackMode, ScheduleSpec};
+use soda::kernel::{KernelConfig, Partition, PartitionKind, RollbackMode};
 use soda::scaling;
 use soda::scene::builtin::builtin;
 use soda::scene::Scene;
@@ -142,7 +143,7 @@ fn threaded(worlds: usize, threads: usize, mode: RollbackMode) -> RunOptions {
         executor: ExecutorKind::Threaded,
         kernel: KernelConfig::new(worlds).mode(mode),
         threads,
-        lead: 0,
+        ..RunOptions::default()
     }
 }
 
@@ -440,17 +441,11 @@ fn rp_efficiency(quick: bool, svg: &Path) -> Result<Vec<Row>> {
             let mut sum = 0.0;
             for seed in 0..seeds {
                 bar.set_message(format!("{} {} seed {seed}", s.name, mode.name()));
-                let options = RunOptions {
-                    executor: ExecutorKind::Virtual,
-                    kernel: KernelConfig::new(8)
-                        .mode(*mode)
-                        .window(16)
-                        .schedule(ScheduleSpec::Seeded(seed))
-                        .record_schedule(false)
-                        .trace(true),
-                    threads: 1,
-                    lead: 0,
-                };
+                let options = RunOptions::virtual_exec(
+                    KernelConfig::new(8).mode(*mode).window(16).trace(true),
+                )
+                .schedule(ScheduleSpec::Seeded(seed))
+                .record_schedule(false);
                 let r = run(s, &options, steps)?;
                 let fraction = r.trace.as_ref().map_or(0.0, territory_fraction);
                 sum += fraction;

@@ -65,7 +65,7 @@ pub(crate) fn input_message<M: CellModel>(
         crate::kernel::Input::Remove(id) => (vec![id], Vec::new()),
         crate::kernel::Input::Replace(s) => (vec![M::id(&s)], vec![s]),
         crate::kernel::Input::Edit(id, edit) => {
-            edits.push((id, edit));
+            edits.push(crate::kernel::message::EntityEdit { id, edit });
             (Vec::new(), Vec::new())
         }
     };

@@ -102,8 +102,8 @@ pub struct Message<S> {
     pub bodies: Bodies<S>,
     /// For an input: the ids of the bodies it removes (empty otherwise).
     pub removes: Vec<BodyId>,
-    /// For an input: the edits it applies, by entity id (empty otherwise).
-    pub edits: Vec<(BodyId, Edit<S>)>,
+    /// For an input: the edits it applies, each with its entity's id (empty otherwise).
+    pub edits: Vec<EntityEdit<S>>,
     /// Delta ghosts (SPEC.md §K4): the sender's state of the cell at `step` differs from its
     /// state at `step − 1`, so a ghost of `step + 1` follows. False for everything else.
     pub follows: bool,
@@ -141,6 +141,16 @@ impl<S> std::fmt::Debug for Edit<S> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("Edit(..)")
     }
+}
+
+/// An [`Edit`] of the entity with id `id`: what an input message carries for
+/// [`Input::Edit`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct EntityEdit<S> {
+    /// The entity edited.
+    pub id: BodyId,
+    /// The change.
+    pub edit: Edit<S>,
 }
 
 /// An external event at a step, applied to the states at that step (before they are used).

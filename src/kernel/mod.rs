@@ -8,7 +8,8 @@
 //! the partition, rollback mode, window and delivery order.
 //!
 //! Modules, lowest first:
-//! - [`config`]: the run configuration (worlds, mode, window, partition, schedule);
+//! - [`config`]: the worlds' configuration (worlds, mode, window, partition, ghosts,
+//!   balancing);
 //! - [`partition`]: cell → world maps (blocks, equal-size k-means, random, explicit);
 //! - [`message`]: ghost / migrate / anti-messages and their total order;
 //! - [`counters`]: per-world and total statistics and their formulas;
@@ -30,10 +31,9 @@ pub mod world;
 pub use balance::{Balancer, LoadLevel, RoundRecord};
 pub use config::{
     BalanceConfig, GhostPolicy, KernelConfig, LoadSource, PartitionKind, PlantedBug, RollbackMode,
-    ScheduleSpec,
 };
 pub use counters::{BalanceCounters, Counters, WorldCounters};
-pub use message::{Edit, Homed, Input, Message, MessageKey, MessageKind, Sign};
+pub use message::{Edit, EntityEdit, Homed, Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
 pub use trace::{RunTrace, WorldTrace};
 pub use world::World;

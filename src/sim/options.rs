@@ -1,5 +1,6 @@
-//! How to run a model: the executor, the kernel configuration and the thread count.
+//! How to run a model: the executor, the kernel configuration and each executor's settings.
 
+use crate::exec::virtual_exec::{ScheduleSpec, VirtualOptions};
 use crate::kernel::KernelConfig;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -57,12 +58,18 @@ impl FromStr for ExecutorKind {
 }
 
 /// How to run a model: the executor, the kernel configuration (ignored by the reference)
-/// and the thread count (threaded executor only).
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+/// and the settings of the executor that runs it: the thread count and lead (threaded), the
+/// schedule and its recording (virtual).
+///
+/// It is written into checkpoints. A document written when the schedule and its recording
+/// were part of the kernel configuration (`kernel.schedule`, `kernel.record_schedule`)
+/// reads back with them here, so a resumed virtual run keeps its schedule.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(from = "stored::StoredRunOptions")]
 pub struct RunOptions {
     /// The executor.
     pub executor: ExecutorKind,
-    /// Worlds, mode, window, partition, schedule.
+    /// Worlds, mode, window, partition, ghosts, balancing.
     pub kernel: KernelConfig,
     /// OS threads of the threaded executor (at least 1).
     pub threads: usize,
@@ -70,8 +77,28 @@ pub struct RunOptions {
     /// checkpoints written before it moved here).
     ///
     /// [`ThreadedOptions::lead`]: crate::exec::threaded::ThreadedOptions::lead
-    #[serde(default)]
     pub lead: u64,
+    /// The virtual executor's schedule ([`VirtualOptions::schedule`]; seed 0 by default).
+    pub schedule: ScheduleSpec,
+    /// Whether the virtual executor records its decisions, so the report carries a replay
+    /// string ([`VirtualOptions::record_schedule`]; on by default).
+    pub record_schedule: bool,
+}
+
+impl Default for RunOptions {
+    /// The reference executor; for the others, the default kernel configuration, one thread,
+    /// lead 0, schedule seed 0 recorded.
+    fn default() -> Self {
+        let virtual_options = VirtualOptions::default();
+        RunOptions {
+            executor: ExecutorKind::default(),
+            kernel: KernelConfig::default(),
+            threads: 0,
+            lead: 0,
+            schedule: virtual_options.schedule,
+            record_schedule: virtual_options.record_schedule,
+        }
+    }
 }
 
 impl RunOptions {
@@ -80,13 +107,13 @@ impl RunOptions {
         Self::default()
     }
 
-    /// The virtual executor with `kernel`.
+    /// The virtual executor with `kernel` (schedule seed 0, decisions recorded).
     pub fn virtual_exec(kernel: KernelConfig) -> Self {
         RunOptions {
             executor: ExecutorKind::Virtual,
             kernel,
             threads: 1,
-            lead: 0,
+            ..Self::default()
         }
     }
 
@@ -96,7 +123,7 @@ impl RunOptions {
             executor: ExecutorKind::Threaded,
             kernel,
             threads,
-            lead: 0,
+            ..Self::default()
         }
     }
 
@@ -104,5 +131,107 @@ impl RunOptions {
     pub fn lead(mut self, lead: u64) -> Self {
         self.lead = lead;
         self
+    }
+
+    /// The same options with the virtual executor's schedule `schedule`.
+    pub fn schedule(mut self, schedule: ScheduleSpec) -> Self {
+        self.schedule = schedule;
+        self
+    }
+
+    /// The same options with the virtual executor's decision recording on or off.
+    pub fn record_schedule(mut self, on: bool) -> Self {
+        self.record_schedule = on;
+        self
+    }
+
+    /// The virtual executor's options these say.
+    pub fn virtual_options(&self) -> VirtualOptions {
+        VirtualOptions {
+            schedule: self.schedule.clone(),
+            record_schedule: self.record_schedule,
+        }
+    }
+}
+
+/// `RunOptions` as documents hold them, older layouts included.
+mod stored {
+    use super::{ExecutorKind, RunOptions, ScheduleSpec, VirtualOptions};
+    use crate::kernel::KernelConfig;
+    use serde::Deserialize;
+
+    /// A `RunOptions` document: the schedule and its recording at the top level, or, in a
+    /// document written before they left the kernel configuration, inside `kernel`.
+    #[derive(Deserialize)]
+    pub(super) struct StoredRunOptions {
+        executor: ExecutorKind,
+        kernel: StoredKernel,
+        threads: usize,
+        #[serde(default)]
+        lead: u64,
+        #[serde(default)]
+        schedule: Option<ScheduleSpec>,
+        #[serde(default)]
+        record_schedule: Option<bool>,
+    }
+
+    /// A kernel configuration, with the virtual executor's settings an older document
+    /// kept in it.
+    #[derive(Deserialize)]
+    struct StoredKernel {
+        #[serde(flatten)]
+        config: KernelConfig,
+        #[serde(default)]
+        schedule: Option<ScheduleSpec>,
+        #[serde(default)]
+        record_schedule: Option<bool>,
+    }
+
+    impl From<StoredRunOptions> for RunOptions {
+        fn from(s: StoredRunOptions) -> Self {
+            let defaults = VirtualOptions::default();
+            RunOptions {
+                executor: s.executor,
+                kernel: s.kernel.config,
+                threads: s.threads,
+                lead: s.lead,
+                schedule: s
+                    .schedule
+                    .or(s.kernel.schedule)
+                    .unwrap_or(defaults.schedule),
+                record_schedule: s
+                    .record_schedule
+                    .or(s.kernel.record_schedule)
+                    .unwrap_or(defaults.record_schedule),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_round_trip_and_an_older_document_keeps_its_schedule() {
+        let options = RunOptions::virtual_exec(KernelConfig::new(3).window(5))
+            .schedule(ScheduleSpec::Replay(vec![3, 1, 4]))
+            .record_schedule(false);
+        let json = serde_json::to_value(&options).unwrap();
+        assert!(json["kernel"].get("schedule").is_none(), "{json}");
+        let back: RunOptions = serde_json::from_value(json.clone()).unwrap();
+        assert_eq!(back, options);
+        // Written before the schedule left the kernel configuration (and before `lead`
+        // left it too): the schedule and its recording are read from `kernel`.
+        let mut old = json;
+        let top = old.as_object_mut().unwrap();
+        let schedule = top.remove("schedule").unwrap();
+        let record = top.remove("record_schedule").unwrap();
+        top.remove("lead");
+        old["kernel"]["schedule"] = schedule;
+        old["kernel"]["record_schedule"] = record;
+        old["kernel"]["lead"] = 2.into();
+        let back: RunOptions = serde_json::from_value(old).unwrap();
+        assert_eq!(back, options);
     }
 }

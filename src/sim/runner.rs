@@ -228,7 +228,13 @@ impl<M: CellModel + 'static> Runner<M> {
                 (None, events, None)
             }
             ExecutorKind::Virtual => {
-                let (mut run, events) = VirtualRun::new(model, grid, initial, &options.kernel);
+                let (mut run, events) = VirtualRun::new(
+                    model,
+                    grid,
+                    initial,
+                    &options.kernel,
+                    &options.virtual_options(),
+                );
                 for (step, input) in inputs {
                     run.try_add_input(step, input)?;
                 }
@@ -237,10 +243,7 @@ impl<M: CellModel + 'static> Runner<M> {
                 let kernel = kernel_report(
                     &options,
                     1,
-                    options
-                        .kernel
-                        .record_schedule
-                        .then(|| run.schedule_string()),
+                    options.record_schedule.then(|| run.schedule_string()),
                     run.counters(),
                     None,
                     run.balance_history().to_vec(),

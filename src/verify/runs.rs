@@ -3,9 +3,10 @@
 use super::report::{Mismatch, RunCheck, RunOutcome, VerifyReport};
 use crate::divergence::first_difference;
 use crate::exec::error::ExecError;
+use crate::exec::virtual_exec::ScheduleSpec;
 use crate::frame::StatesWanted;
 use crate::grid::Grid;
-use crate::kernel::{GhostPolicy, Input, KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+use crate::kernel::{GhostPolicy, Input, KernelConfig, PartitionKind, RollbackMode};
 use crate::model::{CellModel, Step};
 use crate::sim::{ExecutorKind, RunOptions, Runner};
 use std::sync::Arc;
@@ -135,12 +136,9 @@ pub fn verify_with_progress<M: CellModel + Clone + 'static>(
         let kernel = options.kernel.clone().mode(mode);
         let first = options.first_schedule;
         for seed in first..first.saturating_add(options.schedules) {
-            let run = RunOptions::virtual_exec(
-                kernel
-                    .clone()
-                    .schedule(ScheduleSpec::Seeded(seed))
-                    .record_schedule(true),
-            );
+            let run = RunOptions::virtual_exec(kernel.clone())
+                .schedule(ScheduleSpec::Seeded(seed))
+                .record_schedule(true);
             let check = check_run(setup, &run, mode, Some(seed), steps, &expected);
             progress(&check);
             report.runs.push(check);

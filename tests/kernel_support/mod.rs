@@ -3,11 +3,9 @@
 #![allow(dead_code)]
 
 use proptest::prelude::*;
-use soda::exec::virtual_exec::VirtualRun;
+use soda::exec::virtual_exec::{VirtualOptions, VirtualRun};
 use soda::kernel::synthetic::{Particle, Particles};
-use soda::kernel::{
-    Counters, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode, ScheduleSpec,
-};
+use soda::kernel::{Counters, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode};
 use soda::scene::builtin::builtin;
 use soda::{Body, CellModel, Frame, Grid, ReferenceRun, RigidBodyModel};
 
@@ -30,9 +28,10 @@ pub fn compare<M: CellModel + Clone>(
     grid: &Grid,
     init: &[M::State],
     config: &KernelConfig,
+    options: &VirtualOptions,
     expected: &[Frame<M::Event>],
 ) -> Result<Counters, String> {
-    let (mut run, _) = VirtualRun::new(model.clone(), grid.clone(), init.to_vec(), config);
+    let (mut run, _) = VirtualRun::new(model.clone(), grid.clone(), init.to_vec(), config, options);
     let frames = run.run(expected.len() as u64);
     if frames.len() != expected.len() {
         return Err(format!(
@@ -45,7 +44,7 @@ pub fn compare<M: CellModel + Clone>(
         if a != b {
             return Err(format!(
                 "first divergence at step {}: kernel hash {:016x} ({} bodies, {} events) vs \
-                 reference {:016x} ({} bodies, {} events)\nconfig: {config:?}\n\
+                 reference {:016x} ({} bodies, {} events)\nconfig: {config:?}\noptions: {options:?}\n\
                  replay with ScheduleSpec::Replay(parse_schedule(..)): {}",
                 b.step,
                 a.hash,
@@ -91,10 +90,14 @@ impl Case {
             .window(self.window)
             .partition(self.partition.clone())
             .partition_seed(self.partition_seed)
-            .schedule(ScheduleSpec::Seeded(self.schedule_seed))
             .ghosts(self.ghosts);
         c.planted_bug = bug;
         c
+    }
+
+    /// The virtual executor's options: the case's schedule seed.
+    pub fn options(&self) -> VirtualOptions {
+        VirtualOptions::seeded(self.schedule_seed)
     }
 }
 
@@ -203,24 +206,28 @@ pub fn property(case: &Case, bug: PlantedBug) -> Result<Counters, String> {
 }
 
 fn property_inner(case: &Case, bug: PlantedBug) -> Result<Counters, String> {
-    property_with(case, &case.config(bug))
+    property_with(case, &case.config(bug), &case.options())
 }
 
-/// The equivalence property for `case`'s scene and steps under an explicit configuration.
-pub fn property_with(case: &Case, config: &KernelConfig) -> Result<Counters, String> {
-    let config = config.clone();
+/// The equivalence property for `case`'s scene and steps under an explicit configuration
+/// and schedule.
+pub fn property_with(
+    case: &Case,
+    config: &KernelConfig,
+    options: &VirtualOptions,
+) -> Result<Counters, String> {
     match case.scene {
         SceneCase::Particles(n, dims, open, seed) => {
             let (m, g, b): (Particles, Grid, Vec<Particle>) = Particles::scene(n, dims, open, seed);
             let exp = reference(&m, &g, &b, case.steps);
-            compare(&m, &g, &b, &config, &exp)
+            compare(&m, &g, &b, config, options, &exp)
         }
         SceneCase::Builtin(name, n, seed) => {
             let s = builtin(name, Some(n), seed).expect("built-in scene");
             let (m, g, b): (RigidBodyModel, Grid, Vec<Body>) =
                 (s.model(), s.grid(), s.initial_bodies());
             let exp = reference(&m, &g, &b, case.steps);
-            compare(&m, &g, &b, &config, &exp)
+            compare(&m, &g, &b, config, options, &exp)
         }
     }
 }

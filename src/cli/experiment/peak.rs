@@ -302,7 +302,7 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
                     executor: ExecutorKind::Threaded,
                     kernel: KernelConfig::new(worlds).window(window).trace(true),
                     threads,
-                    lead: 0,
+                    ..RunOptions::default()
                 };
                 let mut times: Vec<(u64, f64)> = Vec::with_capacity(steps as usize + 1);
                 let start = Instant::now();

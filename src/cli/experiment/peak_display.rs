@@ -46,7 +46,7 @@ pub(super) fn peak_display(quick: bool, svg: &Path) -> Result<Vec<Row>> {
                     executor: ExecutorKind::Threaded,
                     kernel: KernelConfig::new(threads).window(window),
                     threads,
-                    lead: 0,
+                    ..RunOptions::default()
                 };
                 let playback = Playback::new(buffer, fps as f64);
                 let clock = playback.clone();

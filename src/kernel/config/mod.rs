@@ -1,5 +1,8 @@
-//! The configuration of a Time Warp run: number of worlds, rollback mode, optimism window,
-//! partitioner and the virtual executor's schedule.
+//! The configuration of a Time Warp run's worlds: number of worlds, rollback mode, optimism
+//! window, partitioner, ghost policy and load balancing. How an executor runs them (the
+//! virtual executor's schedule, the threaded executor's threads and lead) is the executor's
+//! own options (`crate::exec::virtual_exec::VirtualOptions`,
+//! `crate::exec::threaded::ThreadedOptions`).
 
 mod balance;
 mod names;
@@ -58,31 +61,6 @@ pub enum PartitionKind {
     Explicit(Vec<u32>),
 }
 
-/// Who decides, in the virtual executor, which world acts next and which in-flight message
-/// is delivered next.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ScheduleSpec {
-    /// A ChaCha8 generator with this seed. Replays exactly from the seed.
-    Seeded(u64),
-    /// The recorded decisions of an earlier run (see `VirtualRun::schedule_string`), then the
-    /// deterministic fallback.
-    Replay(Vec<u32>),
-    /// Fuzz bytes: each decision consumes one or two bytes, then the deterministic fallback.
-    Bytes(Vec<u8>),
-    /// The deterministic fallback only: deliver the oldest in-flight message first, else let
-    /// a world with a non-empty inbox apply it, else let the world with the smallest LVT
-    /// compute (lowest id on ties). Worlds then advance in lockstep with no straggler: the
-    /// overhead of the kernel alone.
-    Fifo,
-}
-
-impl Default for ScheduleSpec {
-    fn default() -> Self {
-        ScheduleSpec::Seeded(0)
-    }
-}
-
 /// Deliberate bugs, for proving that the determinism tests can fail. Never use them.
 #[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -112,11 +90,6 @@ pub struct KernelConfig {
     pub partition: PartitionKind,
     /// Seed of the k-means and random partitioners.
     pub partition_seed: u64,
-    /// The virtual executor's schedule.
-    pub schedule: ScheduleSpec,
-    /// Record the virtual executor's decisions so the run can print a replay string
-    /// (costs four bytes per decision).
-    pub record_schedule: bool,
     /// Record a run trace (LVT over time, rollbacks, GVT advances, messages per step).
     /// Observation only: the committed bits are the same either way.
     pub trace: bool,
@@ -143,8 +116,6 @@ impl Default for KernelConfig {
             window: 16,
             partition: PartitionKind::Blocks,
             partition_seed: 0,
-            schedule: ScheduleSpec::Seeded(0),
-            record_schedule: true,
             trace: false,
             balance: BalanceConfig::default(),
             ghosts: GhostPolicy::Delta,
@@ -186,12 +157,6 @@ impl KernelConfig {
         self
     }
 
-    /// Sets the schedule.
-    pub fn schedule(mut self, schedule: ScheduleSpec) -> Self {
-        self.schedule = schedule;
-        self
-    }
-
     /// Turns trace recording on or off.
     pub fn trace(mut self, on: bool) -> Self {
         self.trace = on;
@@ -209,12 +174,6 @@ impl KernelConfig {
         self.ghosts = ghosts;
         self
     }
-
-    /// Turns decision recording on or off.
-    pub fn record_schedule(mut self, on: bool) -> Self {
-        self.record_schedule = on;
-        self
-    }
 }
 
 #[cfg(test)]
@@ -223,7 +182,8 @@ mod tests {
 
     #[test]
     fn a_planted_bug_is_not_serialised_and_old_documents_still_read() {
-        // (Older documents also carry `lead`, now an executor setting: ignored too.)
+        // (Older documents also carry `lead`, `schedule` and `record_schedule`, now executor
+        // settings: ignored here; `RunOptions` reads the last two back into its own fields.)
         let config = KernelConfig {
             planted_bug: PlantedBug::DropLoneAnti,
             ..KernelConfig::new(3)
@@ -236,7 +196,10 @@ mod tests {
         let mut old: serde_json::Value = serde_json::from_str(&json).unwrap();
         old["planted_bug"] = "DropLoneAnti".into();
         old["lead"] = 3.into();
+        old["schedule"] = serde_json::json!({"seeded": 5});
+        old["record_schedule"] = false.into();
         let back: KernelConfig = serde_json::from_value(old).unwrap();
         assert_eq!(back.planted_bug, PlantedBug::None);
+        assert_eq!(back, KernelConfig::new(3));
     }
 }

@@ -3,6 +3,7 @@
 //! (SPEC.md §K5).
 
 use super::index::{cells_around, OwnCell};
+use super::keys::MigrationIn;
 use super::log::Out;
 use super::World;
 use crate::kernel::message::{Message, MessageKind};
@@ -57,7 +58,10 @@ impl<M: CellModel> World<M> {
                     slot.migrate_known.insert(src);
                     for h in Arc::unwrap_or_clone(msg.bodies) {
                         slot.foreign_in
-                            .entry((h.cell, src))
+                            .entry(MigrationIn {
+                                dst_cell: h.cell,
+                                src_cell: src,
+                            })
                             .or_default()
                             .push(h.state);
                     }

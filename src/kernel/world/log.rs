@@ -3,10 +3,10 @@
 //! sent (SPEC.md §K3); reading committed steps and fossil collection.
 
 use super::index::{MarginCell, OwnCell, PerOwnCell};
+use super::keys::{MigrationIn, RecvKey, SentKey};
 use super::World;
 use crate::frame::Event;
-use crate::kernel::message::{Bodies, Edit, Homed, MessageKind};
-use crate::kernel::partition::WorldId;
+use crate::kernel::message::{Bodies, EntityEdit, Homed};
 use crate::model::{BodyId, CellModel, Step};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -147,16 +147,16 @@ pub(super) struct Slot<S, E> {
     pub(super) ghosts: Vec<Option<Arc<Vec<S>>>>,
     /// Conservative mode: the foreign cells (global) whose ghost of this step has arrived.
     pub(super) ghost_known: BTreeSet<u32>,
-    /// The bodies migrating in at this step, by (own destination cell, foreign source
-    /// cell), both global.
-    pub(super) foreign_in: BTreeMap<(u32, u32), Vec<S>>,
+    /// The bodies migrating in at this step, by own destination cell and foreign source
+    /// cell.
+    pub(super) foreign_in: BTreeMap<MigrationIn, Vec<S>>,
     /// Conservative mode: the foreign cells (global) whose migrations into this step are
     /// known (arrived, or known to be none).
     pub(super) migrate_known: BTreeSet<u32>,
-    /// What it received about this step, by (kind, source cell).
-    pub(super) recv: BTreeMap<(MessageKind, u32), Recv<S>>,
-    /// What it sent about this step, by (kind, source cell, destination world).
-    pub(super) sent: BTreeMap<(MessageKind, u32, WorldId), Sent<S>>,
+    /// What it received about this step, by kind and source cell.
+    pub(super) recv: BTreeMap<RecvKey, Recv<S>>,
+    /// What it sent about this step, by kind, source cell and destination world.
+    pub(super) sent: BTreeMap<SentKey, Sent<S>>,
     /// The inputs at this step, by sequence number.
     pub(super) inputs: BTreeMap<u32, InputEntry<S>>,
 }
@@ -165,8 +165,8 @@ pub(super) struct Slot<S, E> {
 /// state) pairs it adds.
 #[derive(Debug)]
 pub(super) struct InputEntry<S> {
-    /// `(id, edit)`: applied first, to the state the entity has at the step.
-    pub(super) edits: Vec<(BodyId, Edit<S>)>,
+    /// Edits, applied first, each to the state its entity has at the step.
+    pub(super) edits: Vec<EntityEdit<S>>,
     /// Ids removed (or replaced) next.
     pub(super) removes: Vec<BodyId>,
     /// States added last, with their home cells.

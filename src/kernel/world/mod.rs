@@ -21,6 +21,7 @@
 
 mod conservative;
 mod index;
+mod keys;
 mod log;
 mod receive;
 mod recompute;

@@ -2,6 +2,7 @@
 //! anti-messages, and the effect of each message kind on the log (SPEC.md §K4).
 
 use super::index::OwnCell;
+use super::keys::{MigrationIn, RecvKey};
 use super::log::{view, Version};
 use super::World;
 use crate::kernel::config::RollbackMode;
@@ -59,7 +60,13 @@ impl<M: CellModel> World<M> {
             return self.apply_input(msg);
         }
         let delta = self.delta();
-        let r = self.slots[i].recv.entry((kind, src)).or_default();
+        let r = self.slots[i]
+            .recv
+            .entry(RecvKey {
+                kind,
+                src_cell: src,
+            })
+            .or_default();
         let before = r.effective().map(|e| e.seq);
         // The cells the effective migration landed in (ghosts do not need them).
         let old_cells: Vec<u32> = match r.effective() {
@@ -138,10 +145,14 @@ impl<M: CellModel> World<M> {
                         .map(|h| h.state.clone())
                         .collect();
                     let slot = &mut self.slots[i];
+                    let key = MigrationIn {
+                        dst_cell: d,
+                        src_cell: src,
+                    };
                     if bodies.is_empty() {
-                        slot.foreign_in.remove(&(d, src));
+                        slot.foreign_in.remove(&key);
                     } else {
-                        slot.foreign_in.insert((d, src), bodies);
+                        slot.foreign_in.insert(key, bodies);
                     }
                 }
                 let mut dirtied = false;
@@ -181,7 +192,10 @@ impl<M: CellModel> World<M> {
             // Later steps take the view only if they inherit it: no ghost of their own.
             let own_ghost = || {
                 slot.recv
-                    .get(&(MessageKind::Ghost, src))
+                    .get(&RecvKey {
+                        kind: MessageKind::Ghost,
+                        src_cell: src,
+                    })
                     .is_some_and(|r| r.effective().is_some())
             };
             if u > t && (!carry || own_ghost()) {
@@ -224,7 +238,7 @@ impl<M: CellModel> World<M> {
             for (x, st) in self.slots[i].states.enumerate() {
                 let touched = |b: &M::State| {
                     let id = M::id(b);
-                    msg.removes.contains(&id) || msg.edits.iter().any(|(edited, _)| *edited == id)
+                    msg.removes.contains(&id) || msg.edits.iter().any(|e| e.id == id)
                 };
                 if view(st).iter().any(touched) {
                     cells.insert(self.cells[x]);

@@ -3,12 +3,13 @@
 //! Rollback-and-Propagate's re-execution with early cut-off (SPEC.md §K4, §K5).
 
 use super::index::{cells_around, OwnCell, PerOwnCell};
+use super::keys::MigrationIn;
 use super::log::{share, view, Out, Shared};
 use super::territory::Nb;
 use super::World;
 use crate::frame::{Event, LeftGrid};
 use crate::kernel::config::{PlantedBug, RollbackMode};
-use crate::kernel::message::{Homed, Message};
+use crate::kernel::message::{EntityEdit, Homed, Message};
 use crate::kernel::partition::WorldId;
 use crate::model::{BodyId, CellModel, Neighbourhood, Step};
 use std::collections::BTreeSet;
@@ -180,11 +181,15 @@ impl<M: CellModel> World<M> {
                 }
             }
         }
-        for (_, bs) in cur.foreign_in.range((d, 0)..=(d, u32::MAX)) {
+        for bs in cur
+            .foreign_in
+            .range(MigrationIn::into_cell(d))
+            .map(|(_, bs)| bs)
+        {
             v.extend(bs.iter().cloned());
         }
         if !cur.inputs.is_empty() {
-            for (id, edit) in cur.inputs.values().flat_map(|i| i.edits.iter()) {
+            for EntityEdit { id, edit } in cur.inputs.values().flat_map(|i| i.edits.iter()) {
                 if let Some(b) = v.iter_mut().find(|b| M::id(b) == *id) {
                     let edited = edit.apply(b);
                     let home = grid
@@ -388,7 +393,7 @@ impl<M: CellModel> World<M> {
         let mut general: BTreeSet<u32> = next
             .foreign_in
             .keys()
-            .map(|k| k.0)
+            .map(|k| k.dst_cell)
             .chain(
                 next.inputs
                     .values()

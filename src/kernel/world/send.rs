@@ -2,6 +2,7 @@
 //! only when the content changed; SPEC.md §K4, "Lazy cancellation").
 
 use super::index::OwnCell;
+use super::keys::SentKey;
 use super::log::Sent;
 use super::World;
 use crate::kernel::config::{PlantedBug, RollbackMode};
@@ -11,21 +12,28 @@ use crate::model::{CellModel, Step};
 use std::sync::Arc;
 
 impl<M: CellModel> World<M> {
-    /// Sends `(kind, step, cell)` to world `w` with `content` (`None`: no message) and the
-    /// `follows` flag: in conservative mode always (an empty content is a null message);
-    /// otherwise lazily — nothing if the live version sent before has the same content and
-    /// flag (or there is none and `content` is `None`), else an anti-message for it (if any)
-    /// and the new version (if any).
+    /// Sends the message `key` of step `step` (its kind, own source cell and destination
+    /// world) with `content` (`None`: no message) and the `follows` flag: in conservative
+    /// mode always (an empty content is a null message); otherwise lazily — nothing if the
+    /// live version sent before has the same content and flag (or there is none and
+    /// `content` is `None`), else an anti-message for it (if any) and the new version (if
+    /// any).
     pub(super) fn send(
         &mut self,
-        (kind, step, cell, w): (MessageKind, Step, u32, WorldId),
+        step: Step,
+        key: SentKey,
         content: Option<Bodies<M::State>>,
         follows: bool,
         out: &mut Vec<Message<M::State>>,
     ) {
+        let SentKey {
+            kind,
+            src_cell: cell,
+            dst_world: w,
+        } = key;
         let conservative = self.mode == RollbackMode::Conservative;
         let i = self.si(step);
-        let sent = self.slots[i].sent.get(&(kind, cell, w));
+        let sent = self.slots[i].sent.get(&key);
         let live = sent.and_then(|s| s.live.as_ref());
         let live_follows = sent.is_some_and(|s| s.follows);
         if !conservative {
@@ -38,7 +46,7 @@ impl<M: CellModel> World<M> {
                 return;
             }
         }
-        let entry = self.slots[i].sent.entry((kind, cell, w)).or_insert(Sent {
+        let entry = self.slots[i].sent.entry(key).or_insert(Sent {
             seq: 0,
             live: None,
             follows: false,
@@ -132,12 +140,12 @@ impl<M: CellModel> World<M> {
         });
         for k in 0..self.targets[x].len() {
             let w = self.targets[x][k];
-            self.send(
-                (MessageKind::Ghost, t, cell, w),
-                content.clone(),
-                follows,
-                out,
-            );
+            let key = SentKey {
+                kind: MessageKind::Ghost,
+                src_cell: cell,
+                dst_world: w,
+            };
+            self.send(t, key, content.clone(), follows, out);
         }
     }
 
@@ -165,8 +173,12 @@ impl<M: CellModel> World<M> {
             .unwrap_or_default();
         let content = (self.mode == RollbackMode::Conservative || !content.is_empty())
             .then(|| Arc::new(content));
-        let id = (MessageKind::Migrate, s + 1, self.cells[x], w);
-        self.send(id, content, false, out);
+        let key = SentKey {
+            kind: MessageKind::Migrate,
+            src_cell: self.cells[x],
+            dst_world: w,
+        };
+        self.send(s + 1, key, content, false, out);
     }
 
     /// Sends the ghosts due (`ghost_due`) in (step, cell) order: at the end of an action, so a

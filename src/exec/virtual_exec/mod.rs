@@ -2,7 +2,8 @@
 //! decision, either a world to act or an in-flight message to deliver — so deliveries are
 //! delayed and reordered at will, and an anti-message may overtake its positive twin.
 //!
-//! The scheduler is a ChaCha8 generator ([`ScheduleSpec::Seeded`]), fuzz bytes
+//! The scheduler ([`VirtualOptions::schedule`], an executor setting beside the kernel's
+//! [`KernelConfig`]) is a ChaCha8 generator ([`ScheduleSpec::Seeded`]), fuzz bytes
 //! ([`ScheduleSpec::Bytes`]), a recorded decision list ([`ScheduleSpec::Replay`]) or the
 //! deterministic FIFO fallback. Every decision is an index into the list of enabled actions
 //! (the worlds that want to act, ascending, then the in-flight messages in send order); the
@@ -15,37 +16,45 @@
 //! handed to the sink in step order, and the worlds fossil-collect.
 //!
 //! ```
-//! use soda::exec::virtual_exec::{parse_schedule, VirtualRun};
+//! use soda::exec::virtual_exec::{parse_schedule, VirtualOptions, VirtualRun};
 //! use soda::kernel::synthetic::Particles;
-//! use soda::kernel::{KernelConfig, PartitionKind, RollbackMode, ScheduleSpec};
+//! use soda::kernel::{KernelConfig, PartitionKind, RollbackMode};
 //!
 //! let (model, grid, bodies) = Particles::scene(50, [4, 2, 2], false, 1);
 //! let config = KernelConfig::new(4)
 //!     .mode(RollbackMode::Cell)
 //!     .window(8)
-//!     .partition(PartitionKind::Blocks)
-//!     .schedule(ScheduleSpec::Seeded(7));
-//! let (mut run, _left_domain) = VirtualRun::new(model.clone(), grid.clone(), bodies.clone(), &config);
+//!     .partition(PartitionKind::Blocks);
+//! let options = VirtualOptions::seeded(7);
+//! let (mut run, _left_domain) =
+//!     VirtualRun::new(model.clone(), grid.clone(), bodies.clone(), &config, &options);
 //! let frames = run.run(20); // committed frames 1..=20, hashed like the reference's
 //! let counters = run.counters();
 //! assert_eq!(frames.len(), 20);
 //! assert!(counters.total.efficiency() <= 1.0);
 //!
 //! // The printed schedule replays the run exactly.
-//! let replay = config.clone().schedule(parse_schedule(&run.schedule_string()).unwrap());
-//! let (mut again, _) = VirtualRun::new(model, grid, bodies, &replay);
+//! let replay = options.schedule(parse_schedule(&run.schedule_string()).unwrap());
+//! let (mut again, _) = VirtualRun::new(model, grid, bodies, &config, &replay);
 //! assert_eq!(again.run(20), frames);
 //! ```
 
+mod chooser;
+mod options;
+
+pub use options::{parse_schedule, ScheduleSpec, VirtualOptions};
+
+use chooser::Chooser;
+
 use super::control::RunControl;
-use super::error::{ExecError, InputError, ScheduleParseError};
+use super::error::{ExecError, InputError};
 use super::live::{LiveStatus, WorldStatus};
 use super::load::LoadMeter;
 use super::sync::panic_message;
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
-use crate::kernel::config::{KernelConfig, ScheduleSpec};
+use crate::kernel::config::KernelConfig;
 use crate::kernel::config::{LoadSource, RollbackMode};
 use crate::kernel::counters::Counters;
 use crate::kernel::gvt::global_virtual_time;
@@ -54,103 +63,12 @@ use crate::kernel::partition::{Partition, WorldId};
 use crate::kernel::trace::{GvtSample, RunTrace};
 use crate::kernel::world::World;
 use crate::model::{CellModel, Step};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
 use std::collections::{BTreeMap, VecDeque};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 
 /// Prefix of schedule strings.
 const SCHEDULE_PREFIX: &str = "v1:";
-
-/// Parses a string printed by [`VirtualRun::schedule_string`] into a replay schedule.
-pub fn parse_schedule(s: &str) -> Result<ScheduleSpec, ScheduleParseError> {
-    let body = s
-        .trim()
-        .strip_prefix(SCHEDULE_PREFIX)
-        .ok_or(ScheduleParseError::MissingPrefix {
-            prefix: SCHEDULE_PREFIX,
-        })?;
-    if body.is_empty() {
-        return Ok(ScheduleSpec::Replay(Vec::new()));
-    }
-    body.split('.')
-        .map(|t| {
-            t.parse::<u32>()
-                .map_err(|source| ScheduleParseError::BadDecision {
-                    token: t.to_string(),
-                    source,
-                })
-        })
-        .collect::<Result<Vec<_>, _>>()
-        .map(ScheduleSpec::Replay)
-}
-
-enum Chooser {
-    Seeded(Box<ChaCha8Rng>),
-    Bytes(Vec<u8>, usize),
-    Replay(Vec<u32>, usize),
-    Fifo,
-}
-
-impl Chooser {
-    fn new(spec: &ScheduleSpec) -> Self {
-        match spec {
-            ScheduleSpec::Seeded(s) => Chooser::Seeded(Box::new(ChaCha8Rng::seed_from_u64(*s))),
-            ScheduleSpec::Bytes(b) => Chooser::Bytes(b.clone(), 0),
-            ScheduleSpec::Replay(d) => Chooser::Replay(d.clone(), 0),
-            ScheduleSpec::Fifo => Chooser::Fifo,
-        }
-    }
-
-    /// Index into `acts` enabled worlds followed by `msgs` in-flight messages.
-    /// `laggard` is the index (among the acts) of the first enabled world with a non-empty
-    /// inbox, or else of the enabled world with the smallest LVT.
-    fn choose(&mut self, acts: usize, msgs: usize, laggard: usize) -> usize {
-        let total = acts + msgs;
-        let fifo = |_: ()| if msgs > 0 { acts } else { laggard };
-        match self {
-            Chooser::Seeded(rng) => {
-                if rng.random_range(0..total) >= acts {
-                    // Mostly near the oldest (geometric), sometimes anywhere: deliveries are
-                    // reordered and some are delayed for long, but delays stay bounded in
-                    // expectation (uniform picks from a large pool make Time Warp thrash).
-                    let k = if rng.random_bool(0.8) {
-                        (rng.random::<u32>().trailing_zeros() as usize).min(msgs - 1)
-                    } else {
-                        rng.random_range(0..msgs)
-                    };
-                    acts + k
-                } else {
-                    rng.random_range(0..acts)
-                }
-            }
-            Chooser::Bytes(b, pos) => {
-                let need = if total > 256 { 2 } else { 1 };
-                if *pos + need > b.len() {
-                    return fifo(());
-                }
-                let mut v = b[*pos] as usize;
-                if need == 2 {
-                    v = v << 8 | b[*pos + 1] as usize;
-                }
-                *pos += need;
-                v % total
-            }
-            Chooser::Replay(d, pos) => match d.get(*pos) {
-                Some(&i) if (i as usize) < total => {
-                    *pos += 1;
-                    i as usize
-                }
-                _ => {
-                    *pos = usize::MAX / 2;
-                    fifo(())
-                }
-            },
-            Chooser::Fifo => fifo(()),
-        }
-    }
-}
 
 /// A Time Warp run of a cell model on the virtual executor.
 pub struct VirtualRun<M: CellModel> {
@@ -195,8 +113,9 @@ pub struct VirtualRun<M: CellModel> {
 }
 
 impl<M: CellModel> VirtualRun<M> {
-    /// A run of `config.worlds` worlds starting at step 0 from `initial`. Entities outside
-    /// the grid are dropped and reported as `LeftDomain` events (as by the reference).
+    /// A run of `config.worlds` worlds starting at step 0 from `initial`, scheduled as
+    /// `options` say. Entities outside the grid are dropped and reported as `LeftDomain`
+    /// events (as by the reference).
     ///
     /// # Panics
     /// If `config.worlds` is 0 or an explicit partition does not fit the grid.
@@ -205,6 +124,7 @@ impl<M: CellModel> VirtualRun<M> {
         grid: Grid,
         initial: Vec<M::State>,
         config: &KernelConfig,
+        options: &VirtualOptions,
     ) -> (Self, Vec<Event<M::Event>>) {
         assert!(config.worlds >= 1, "at least one world");
         let super::Worlds {
@@ -232,8 +152,8 @@ impl<M: CellModel> VirtualRun<M> {
             pool: VecDeque::new(),
             acts: Vec::new(),
             in_flight: BTreeMap::new(),
-            chooser: Chooser::new(&config.schedule),
-            record: config.record_schedule,
+            chooser: Chooser::new(&options.schedule),
+            record: options.record_schedule,
             decisions: Vec::new(),
             turn: 0,
             gvt: 1,
@@ -260,7 +180,7 @@ impl<M: CellModel> VirtualRun<M> {
         (run, events)
     }
 
-    /// The same run with its schedule driven by `bytes` (for fuzzing).
+    /// The same run with its schedule driven by `bytes` (for fuzzing), decisions recorded.
     pub fn from_bytes(
         model: M,
         grid: Grid,
@@ -268,9 +188,8 @@ impl<M: CellModel> VirtualRun<M> {
         config: &KernelConfig,
         bytes: &[u8],
     ) -> (Self, Vec<Event<M::Event>>) {
-        let mut c = config.clone();
-        c.schedule = ScheduleSpec::Bytes(bytes.to_vec());
-        Self::new(model, grid, initial, &c)
+        let options = VirtualOptions::new(ScheduleSpec::Bytes(bytes.to_vec()));
+        Self::new(model, grid, initial, config, &options)
     }
 
     fn post(&mut self, msgs: Vec<Message<M::State>>) {
@@ -461,7 +380,8 @@ impl<M: CellModel> VirtualRun<M> {
     }
 
     /// The decisions taken so far, as a string [`parse_schedule`] turns back into a schedule
-    /// that replays this run exactly (empty unless `record_schedule`).
+    /// that replays this run exactly (no decisions unless
+    /// [`VirtualOptions::record_schedule`]).
     pub fn schedule_string(&self) -> String {
         let d: Vec<String> = self.decisions.iter().map(|d| d.to_string()).collect();
         format!("{SCHEDULE_PREFIX}{}", d.join("."))
@@ -704,21 +624,23 @@ pub struct VirtualReport<E> {
     pub frames: Vec<Frame<E>>,
     /// Counters.
     pub counters: Counters,
-    /// The replay string (empty decisions unless `record_schedule`).
+    /// The replay string (no decisions unless [`VirtualOptions::record_schedule`]).
     pub schedule: String,
     /// `LeftDomain` events of initial states outside the grid.
     pub initial_events: Vec<Event<E>>,
 }
 
-/// Runs `model` from `initial` for `steps` steps on the virtual executor.
+/// Runs `model` from `initial` for `steps` steps on the virtual executor, scheduled as
+/// `options` say.
 pub fn run_virtual<M: CellModel>(
     model: M,
     grid: Grid,
     initial: Vec<M::State>,
     config: &KernelConfig,
+    options: &VirtualOptions,
     steps: u64,
 ) -> VirtualReport<M::Event> {
-    let (mut run, initial_events) = VirtualRun::new(model, grid, initial, config);
+    let (mut run, initial_events) = VirtualRun::new(model, grid, initial, config, options);
     let frames = run.run(steps);
     VirtualReport {
         frames,

@@ -1,0 +1,130 @@
+//! Committed frames: each world hands its states of the steps below GVT to the frame
+//! assembly; a step every world contributed is queued whole, in step order, for the output
+//! stage (the calling thread), which sorts, hashes and hands it to the sink.
+
+use super::report::ThreadTimes;
+use super::shared::{RunStatus, SharedRun, ThreadedWorld};
+use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
+use crate::frame::{Event, Frame, StatesWanted};
+use crate::kernel::trace::GvtSample;
+use crate::model::{CellModel, Step};
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+
+/// Committed steps being assembled from the worlds' contributions.
+pub(super) struct Assembly<M: CellModel> {
+    /// The steps some worlds have contributed to, by step.
+    pub(super) partial: BTreeMap<Step, Partial<M>>,
+    /// The next step to go to the output stage (when every world has contributed it).
+    pub(super) next: Step,
+}
+
+/// One committed step's contributions so far.
+pub(super) struct Partial<M: CellModel> {
+    /// How many worlds contributed.
+    pub(super) worlds: usize,
+    /// The contributing worlds' cells' states (any order), shared with their logs.
+    pub(super) states: Vec<Arc<[M::State]>>,
+    /// The events of their cells' computations of the step before.
+    pub(super) events: Vec<Event<M::Event>>,
+}
+
+/// Committed steps waiting for the output stage (the calling thread), whole (every world
+/// contributed) but not yet sorted and hashed: the output stage finishes the frames, off the
+/// workers' critical path.
+pub(super) struct Output<M: CellModel> {
+    /// Whole committed steps, in step order.
+    pub(super) pending: VecDeque<(Step, Partial<M>)>,
+    /// How many times GVT advanced.
+    pub(super) gvt_advances: u64,
+    /// The worker threads' times, summed as they finish.
+    pub(super) times: ThreadTimes,
+    /// GVT over time (with a trace).
+    pub(super) gvt_samples: Vec<GvtSample>,
+}
+
+impl<M: CellModel> Default for Output<M> {
+    fn default() -> Self {
+        Output {
+            pending: VecDeque::new(),
+            gvt_advances: 0,
+            times: ThreadTimes::default(),
+            gvt_samples: Vec::new(),
+        }
+    }
+}
+
+impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
+    /// Hands the world's states of the steps below `gvt` not yet handed over to the frame
+    /// assembly, then fossil-collects its logs.
+    pub(super) fn contribute(&self, held: &mut ThreadedWorld<M>, gvt: Step) {
+        let last = (gvt - 1).min(self.target.load());
+        if held.contributed >= last {
+            return;
+        }
+        for t in held.contributed + 1..=last {
+            held.world.note_committed(t);
+        }
+        // The cells' states are handed over as shared references, not copied: a copy of a
+        // heavy world's ~1,000 states into fresh memory took ~3 ms now and then (page faults
+        // on memory the allocator had returned), holding up the world and its neighbours.
+        // The output stage flattens them when it sorts and hashes the frame.
+        let mut assembly = self.assembly.lock();
+        for t in held.contributed + 1..=last {
+            let part = assembly.partial.entry(t).or_insert_with(|| Partial {
+                worlds: 0,
+                states: Vec::new(),
+                events: Vec::new(),
+            });
+            part.worlds += 1;
+            part.states.extend(held.world.shared_states_at(t));
+            part.events.extend(held.world.events_at(t - 1).cloned());
+        }
+        held.contributed = last;
+        held.world.sample_log_bytes();
+        held.world.fossil_collect(last);
+        let n = self.worlds.len();
+        let mut done = Vec::new();
+        loop {
+            let next = assembly.next;
+            match assembly.partial.get(&next) {
+                Some(p) if p.worlds == n => {
+                    let p = assembly.partial.remove(&next).expect("present");
+                    done.push((next, p));
+                    assembly.next += 1;
+                }
+                _ => break,
+            }
+        }
+        if done.is_empty() {
+            return;
+        }
+        // Whole steps are queued under the assembly lock, so they reach the output stage in
+        // step order whichever thread completes them; the output stage sorts and hashes.
+        let last_step = done.last().map_or(0, |d| d.0);
+        self.out.lock().pending.extend(done);
+        // Still under the assembly lock, so `committed` only grows: a thread that finished
+        // earlier frames cannot overwrite a later step after the lock is released (the
+        // balancing epochs read it to decide whether the run is over).
+        self.committed.store(last_step);
+        if last_step >= self.target.load() {
+            self.set_status(RunStatus::Done);
+        }
+        drop(assembly);
+    }
+}
+
+/// Finishes committed step `t` from every world's contribution
+/// ([`crate::exec::whole_frame`]) and, if `wanted` asks for them, clones its sorted states.
+pub(super) fn finish_frame<M: CellModel>(
+    t: Step,
+    p: Partial<M>,
+    wanted: &StatesWanted,
+) -> (Frame<M::Event>, Option<Vec<M::State>>) {
+    let (frame, sorted) =
+        crate::exec::whole_frame::<M>(t, p.states.iter().flat_map(|c| c.iter()), p.events);
+    let states = wanted
+        .wants(t, frame.hash)
+        .then(|| sorted.into_iter().cloned().collect());
+    (frame, states)
+}

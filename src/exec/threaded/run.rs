@@ -1,0 +1,310 @@
+//! A threaded run: the worlds are built, the threads started for each epoch (the whole run,
+//! or the steps up to the next balancing round), the output stage hands frames to the sink
+//! meanwhile, and between epochs a balancing round may move cells.
+
+use super::options::{ThreadedOptions, ThreadedSetup};
+use super::output::{finish_frame, Assembly, Output, Partial};
+use super::report::ThreadedReport;
+use super::shared::{InputLog, RunStatus, SharedRun, ThreadedWorld, UNDELIVERED_WINDOWS};
+use crate::exec::control::RunControl;
+use crate::exec::error::ExecError;
+use crate::exec::live::{LiveStatus, WorldStatus};
+use crate::exec::load::LoadMeter;
+use crate::exec::schedule::Schedule;
+use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
+use crate::frame::Frame;
+use crate::kernel::balance::{imbalance, Balancer};
+use crate::kernel::counters::Counters;
+use crate::kernel::message::{Input, Message};
+use crate::kernel::world::World;
+use crate::model::{CellModel, Step};
+use crossbeam_deque::Injector;
+use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The `spins` the output stage passes to [`Facade::pause`]: it polls at a slow pace.
+const OUTPUT_PAUSE: u32 = u32::MAX;
+
+/// [`run_threaded_with`](super::run_threaded_with) with scripted inputs, and a sink that also
+/// gets a [`RunControl`] to schedule inputs during the run (checked against GVT at that
+/// moment) or stop it after the current frame. Stopping ends the run early: the report holds the frames delivered.
+pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
+    setup: ThreadedSetup<M>,
+    options: &ThreadedOptions<'_>,
+    mut sink: impl FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+) -> Result<ThreadedReport<M::Event>, ExecError> {
+    let ThreadedOptions {
+        config,
+        threads,
+        steps,
+        ref wanted,
+        lead,
+    } = *options;
+    let ThreadedSetup {
+        model,
+        grid,
+        initial,
+        inputs: scripted,
+        keep_frames,
+    } = setup;
+    let start = Instant::now();
+    let threads = threads.max(1);
+    let crate::exec::Worlds {
+        mut worlds,
+        events: initial_events,
+        grid,
+        mut partition,
+    } = crate::exec::build_worlds(model, grid, initial, config);
+    let n = worlds.len();
+    // Balancing shares the load between the threads unless told otherwise.
+    let mut balance = config.balance.clone();
+    if balance.workers == 0 {
+        balance.workers = threads;
+    }
+    let mut balancer = Balancer::new(&balance, grid.cell_count());
+    if balancer.opens() {
+        if let Some(p) =
+            crate::exec::opening_round(&mut balancer, &grid, &partition, worlds.iter_mut())
+        {
+            partition = p;
+        }
+    }
+    let mut epoch_end = steps.min(balancer.next_round_after(0));
+    let mut inboxes: Vec<Vec<Message<M::State>>> = (0..n).map(|_| Vec::new()).collect();
+    for w in &mut worlds {
+        w.set_end(epoch_end);
+        for m in w.start() {
+            inboxes[m.dst_world as usize].push(m);
+        }
+    }
+    let published = worlds.iter().map(|w| F::Atomic::new(w.bound())).collect();
+    let inbox_min = inboxes
+        .iter()
+        .map(|i| F::Atomic::new(i.iter().map(|m| m.affects()).min().unwrap_or(u64::MAX)))
+        .collect();
+    let shared = Arc::new(SharedRun::<M, F> {
+        worlds: worlds
+            .into_iter()
+            .map(|world| {
+                F::Mutex::new(ThreadedWorld {
+                    world,
+                    contributed: 0,
+                    meter: LoadMeter::default(),
+                })
+            })
+            .collect(),
+        inboxes: inboxes.into_iter().map(F::Mutex::new).collect(),
+        published,
+        inbox_min,
+        version: F::Atomic::new(0),
+        sched: F::Mutex::new(Schedule::new(n)),
+        cost: (0..n).map(|_| F::Atomic::new(0)).collect(),
+        home: (0..n)
+            .map(|w| F::Atomic::new((w % threads) as u64))
+            .collect(),
+        waiting: Injector::new(),
+        gvt: F::Atomic::new(1),
+        committed: F::Atomic::new(0),
+        delivered: F::Atomic::new(0),
+        undelivered: UNDELIVERED_WINDOWS * config.window.max(8),
+        gvt_round: F::Atomic::new(0),
+        status: F::Atomic::new(if steps == 0 {
+            RunStatus::Done as u64
+        } else {
+            RunStatus::Running as u64
+        }),
+        target: F::Atomic::new(epoch_end),
+        optimistic: config.mode != crate::kernel::RollbackMode::Conservative,
+        lead,
+        assembly: F::Mutex::new(Assembly {
+            partial: BTreeMap::new(),
+            next: 1,
+        }),
+        out: F::Mutex::new(Output::default()),
+        error: F::Mutex::new(None),
+        inputs: F::Mutex::new(InputLog {
+            count: 0,
+            posted: Vec::new(),
+        }),
+        grid: grid.clone(),
+        stop: F::Atomic::new(0),
+        trace: config.trace,
+        started: start,
+    });
+    // The output stage: hand committed frames to the sink while the workers run.
+    for (step, input) in scripted {
+        shared.post_input(step, input)?;
+    }
+    let mut frames = Vec::new();
+    let mut delivered = 0u64;
+    let mut stopped = false;
+    let poster = shared.clone();
+    let mut deliver = |batch: VecDeque<(Step, Partial<M>)>| {
+        for (t, partial) in batch {
+            let (frame, states) = finish_frame::<M>(t, partial, wanted);
+            if delivered < steps && !stopped {
+                delivered += 1;
+                let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
+                let mut post = |step: Step, input: Input<M::State>| poster.post_input(step, input);
+                let mut probe = || LiveStatus {
+                    gvt: poster.gvt.load(),
+                    worlds: poster
+                        .worlds
+                        .iter()
+                        .map(|w| WorldStatus::of(&w.lock().world))
+                        .collect(),
+                };
+                let mut control =
+                    RunControl::new(poster.gvt.load(), &mut post).with_probe(&mut probe);
+                sink(&frame, refs.as_deref(), &mut control);
+                poster.delivered.store(t);
+                if control.stopped() {
+                    stopped = true;
+                    poster.stop.store(1);
+                    poster.set_status(RunStatus::Done);
+                }
+                if keep_frames {
+                    frames.push(frame);
+                }
+            }
+        }
+    };
+    let mut busy_total = vec![0.0f64; n];
+    let mut last_round: Step = 0;
+    loop {
+        run_epoch(&shared, threads, &mut deliver)?;
+        let committed = shared.committed.load();
+        if committed >= steps || steps == 0 || shared.stop.load() == 1 {
+            break;
+        }
+        // A balancing round at the epoch's last step: every world has contributed it, so
+        // GVT = committed + 1 and every state at `committed` is final.
+        let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
+        let span = (committed - last_round).max(1) as f64;
+        let loads: Vec<f64> = locked
+            .iter()
+            .map(|s| {
+                let computed = s.world.counters().cells_computed;
+                s.meter.load(config.balance.load, computed, span)
+            })
+            .collect();
+        let leads: Vec<f64> = locked.iter().map(|s| s.meter.mean_lead()).collect();
+        for (w, s) in locked.iter_mut().enumerate() {
+            busy_total[w] += s.meter.busy_seconds();
+            let computed = s.world.counters().cells_computed;
+            s.meter.restart(computed);
+        }
+        let moved = crate::exec::balance_round(
+            &mut balancer,
+            &grid,
+            &partition,
+            locked.iter_mut().map(|s| &mut s.world),
+            &loads,
+            &leads,
+            committed,
+        );
+        last_round = committed;
+        epoch_end = steps.min(balancer.next_round_after(committed));
+        if let Some(p) = moved {
+            partition = p;
+            // Messages in transit belong to the old owner map: the worlds start again.
+            for (w, inbox) in shared.inboxes.iter().enumerate() {
+                inbox.lock().clear();
+                shared.inbox_min[w].store(u64::MAX);
+            }
+            let pending: Vec<Message<M::State>> = shared
+                .inputs
+                .lock()
+                .posted
+                .iter()
+                .filter(|m| m.step > committed)
+                .cloned()
+                .collect();
+            let reposted = pending
+                .iter()
+                .flat_map(|m| crate::exec::to_every_world(m, n));
+            let started: Vec<Message<M::State>> =
+                locked.iter_mut().flat_map(|s| s.world.start()).collect();
+            for m in started.into_iter().chain(reposted) {
+                let d = m.dst_world as usize;
+                let affects = m.affects();
+                shared.inboxes[d].lock().push(m);
+                shared.lower(&shared.inbox_min[d], affects);
+            }
+        }
+        for (w, s) in locked.iter_mut().enumerate() {
+            s.world.set_end(epoch_end);
+            shared.published[w].store(s.world.bound());
+        }
+        drop(locked);
+        shared.target.store(epoch_end);
+        shared.set_status(RunStatus::Running);
+    }
+    let mut out = std::mem::take(&mut *shared.out.lock());
+    deliver(std::mem::take(&mut out.pending));
+    let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
+    for (w, s) in locked.iter_mut().enumerate() {
+        busy_total[w] += s.meter.busy_seconds();
+    }
+    let world_counters = locked.iter().map(|s| s.world.counters().clone()).collect();
+    let trace = config.trace.then(|| {
+        let mut worlds: Vec<&mut World<M>> = locked.iter_mut().map(|s| &mut s.world).collect();
+        crate::exec::collect_trace(&grid, &partition, &mut worlds, out.gvt_samples)
+    });
+    drop(locked);
+    let mut counters = Counters::from_worlds(world_counters, out.gvt_advances, shared.gvt.load());
+    counters.balance = balancer.counters(imbalance(&busy_total));
+    Ok(ThreadedReport {
+        frames,
+        counters,
+        times: out.times,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        threads,
+        initial_events,
+        trace,
+        balance: balancer.history().to_vec(),
+    })
+}
+
+/// One epoch: every world is queued, `threads` workers run until the epoch's last step is
+/// committed (or the run fails), the output stage delivers frames meanwhile.
+fn run_epoch<M: CellModel + 'static, F: Facade>(
+    shared: &Arc<SharedRun<M, F>>,
+    threads: usize,
+    deliver: &mut impl FnMut(VecDeque<(Step, Partial<M>)>),
+) -> Result<(), ExecError> {
+    // Tasks left from an earlier epoch are stale: every world is queued once again.
+    shared.sched.lock().reset();
+    while !shared.waiting.steal().is_empty() {}
+    for w in 0..shared.worlds.len() {
+        shared.schedule(w);
+    }
+    let handles: Vec<F::Handle> = (0..threads)
+        .map(|me| {
+            let shared = shared.clone();
+            F::spawn(move || shared.worker_loop(me))
+        })
+        .collect();
+    while shared.status() == RunStatus::Running {
+        let batch = std::mem::take(&mut shared.out.lock().pending);
+        if batch.is_empty() {
+            F::pause(OUTPUT_PAUSE);
+        } else {
+            deliver(batch);
+        }
+    }
+    let mut thread_error = None;
+    for h in handles {
+        if let Err(e) = F::join(h) {
+            thread_error.get_or_insert(e);
+        }
+    }
+    if let Some(e) = shared.error.lock().take() {
+        return Err(e);
+    }
+    if let Some(e) = thread_error {
+        return Err(ExecError::Thread(e));
+    }
+    Ok(())
+}
