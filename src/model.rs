@@ -151,7 +151,7 @@ pub trait CellModel: Send + Sync {
     }
 
     /// How states and events travel between processes as exact 64-bit words (the MPI
-    /// executor, SPEC.md §M): `None`, the default, means the model cannot be run across
+    /// executor, SPEC.md §14): `None`, the default, means the model cannot be run across
     /// processes. A model whose state is [`ExactState`](crate::checkpoint::ExactState)
     /// builds it with [`exact_wire`](crate::checkpoint::exact_wire).
     fn wire() -> Option<Wire<Self::State, Self::Event>> {

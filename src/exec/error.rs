@@ -46,12 +46,12 @@ pub enum ExecError {
     /// A worker thread died outside a world's step.
     #[error("worker thread failed: {0}")]
     Thread(#[from] ThreadPanicked),
-    /// The MPI executor cannot run this (SPEC.md §M).
+    /// The MPI executor cannot run this (SPEC.md §14).
     #[error("{0}")]
     Mpi(#[from] MpiError),
 }
 
-/// Why the MPI executor cannot run (SPEC.md §M). Faults during an MPI run (a panic, a
+/// Why the MPI executor cannot run (SPEC.md §14). Faults during an MPI run (a panic, a
 /// message that does not decode) stop every rank with `MPI_Abort` instead: the others could
 /// not go on.
 #[derive(Debug, Error, Clone, PartialEq, Eq)]

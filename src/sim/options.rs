@@ -17,7 +17,7 @@ pub enum ExecutorKind {
     /// OS threads run the worlds as tasks, the laggard (at equal step the heaviest) first.
     Threaded,
     /// The worlds spread over the ranks of an MPI job (cargo feature `mpi`; run under
-    /// `mpirun`; SPEC.md §M). Not in [`ExecutorKind::ALL`]: it needs MPI.
+    /// `mpirun`; SPEC.md §14). Not in [`ExecutorKind::ALL`]: it needs MPI.
     Mpi,
 }
 

@@ -70,7 +70,7 @@ pub struct KernelReport {
     pub mpi: Option<MpiStats>,
 }
 
-/// What an MPI run's ranks sent each other and what its GVT rounds cost (SPEC.md §M),
+/// What an MPI run's ranks sent each other and what its GVT rounds cost (SPEC.md §14),
 /// summed over ranks.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct MpiStats {

@@ -1,4 +1,4 @@
-//! The MPI executor (cargo feature `mpi`; SPEC.md §M): the worlds of one Time Warp run spread
+//! The MPI executor (cargo feature `mpi`; SPEC.md §14): the worlds of one Time Warp run spread
 //! over the ranks of an MPI job, each rank one process driving its worlds on one thread.
 //!
 //! - **Worlds to ranks**: world `w` of `W` runs on rank `w · R / W` (contiguous blocks of
@@ -11,10 +11,12 @@
 //!   sent with non-blocking `MPI_Isend`, received by `MPI_Improbe`/`MPI_Mrecv`. A batch that
 //!   does not decode is fatal. Inputs are never sent: every rank posts the run's scheduled
 //!   inputs to its own worlds.
-//! - **GVT**: ROSS-style synchronous rounds (SPEC.md §M, with the proof): each rank stops
-//!   sending, then every rank repeatedly receives what has arrived and all-gathers (batches
-//!   sent, batches received, the minimum of its worlds' GVT bounds, a stop flag) until the
-//!   sums of sent and received batches are equal; GVT is then the minimum of the bounds.
+//! - **GVT**: ROSS-style synchronous rounds (SPEC.md §14, with its proof): each rank stops
+//!   sending, then every rank repeatedly receives what has arrived and all-gathers (messages
+//!   sent to other ranks, messages received from them, the minimum of its worlds' GVT
+//!   bounds, a stop flag) until the sums of sent and received messages are equal; GVT is
+//!   then the minimum of the bounds. A round that waits too long for messages in transit
+//!   (they were lost) stops the run.
 //! - **Committing**: steps below GVT are final; every rank sends its worlds' states and events
 //!   of those steps to rank 0 (`MPI_Gatherv` of their words), which merges, sorts by id and
 //!   hashes them exactly as the reference does and hands the frames to the sink. Every rank
@@ -94,7 +96,8 @@ impl Drop for Session {
 }
 
 /// Test-only faults planted in the transport (`SODA_MPI_PLANTED_BUG`, read once per run),
-/// to prove the checks catch them: `drop-anti` (anti-messages to other ranks are not sent),
+/// to prove the checks catch them: `drop-anti` (anti-messages to other ranks are counted as
+/// sent but never sent, so the next GVT round finds them missing),
 /// `corrupt` (the first batch a rank sends has a flipped bit), `panic:R:S` (rank R panics in
 /// a world's action from step S on). Never for real runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

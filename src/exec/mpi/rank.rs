@@ -27,7 +27,7 @@ use mpi::topology::{Communicator, Rank as MpiRank, SimpleCommunicator};
 use mpi::Count;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// The tag of batches of kernel messages.
 const TAG_BATCH: i32 = 17;
@@ -56,19 +56,29 @@ pub struct MpiOptions {
     pub steps: u64,
     /// The committed steps whose states rank 0's sink receives.
     pub wanted: StatesWanted,
-    /// Actions a rank takes between two GVT rounds (at least 1); a rank with nothing to do
-    /// joins the round at once.
+    /// Actions a rank takes between two GVT rounds; a rank with nothing to do joins the
+    /// round at once. 0: 8 per world of the rank.
     pub round_actions: usize,
+    /// Seconds a GVT round may wait for messages sent between ranks (every rank has stopped
+    /// sending, so they only have to arrive) before the run stops with an error naming what
+    /// was lost. Default 30 (`SODA_MPI_ROUND_TIMEOUT` overrides it).
+    pub round_timeout_seconds: f64,
 }
 
 impl MpiOptions {
-    /// `kernel` for `steps` steps, no states wanted, 8 actions per local world between rounds.
+    /// `kernel` for `steps` steps, no states wanted, 8 actions per local world between
+    /// rounds, rounds that wait at most 30 s for messages in transit.
     pub fn new(kernel: &KernelConfig, steps: u64) -> Self {
         MpiOptions {
             kernel: kernel.clone(),
             steps,
             wanted: StatesWanted::none(),
             round_actions: 0,
+            round_timeout_seconds: std::env::var("SODA_MPI_ROUND_TIMEOUT")
+                .ok()
+                .and_then(|v| v.parse::<f64>().ok())
+                .filter(|s| s.is_finite() && *s > 0.0)
+                .unwrap_or(30.0),
         }
     }
 }
@@ -188,6 +198,7 @@ pub fn run_mpi_controlled<M: CellModel>(
         last_round: 0,
         inputs_posted: Vec::new(),
         round_actions,
+        round_timeout: Duration::from_secs_f64(options.round_timeout_seconds),
     };
     rank.next_round = rank.balancer.next_round_after(0);
     rank.set_end();
@@ -237,7 +248,7 @@ struct Rank<M: CellModel> {
     /// Messages for each rank, sent at the next flush.
     outbox: Vec<Vec<Message<M::State>>>,
     pending: Vec<PendingSend>,
-    /// Batches sent to and received from other ranks (GVT's counts).
+    /// Messages sent to and received from other ranks (GVT's counts).
     sent: u64,
     received: u64,
     stats: MpiStats,
@@ -254,6 +265,8 @@ struct Rank<M: CellModel> {
     /// One copy of every input (re-posted after a balancing round moves cells).
     inputs_posted: Vec<Message<M::State>>,
     round_actions: usize,
+    /// How long a GVT round may wait for messages in transit before the run stops.
+    round_timeout: Duration,
 }
 
 impl<M: CellModel> Rank<M> {
@@ -302,6 +315,8 @@ impl<M: CellModel> Rank<M> {
                 continue;
             }
             let mut msgs = std::mem::take(&mut self.outbox[dest]);
+            // Counted as sent before anything can lose them (the planted fault below).
+            self.sent += msgs.len() as u64;
             if self.planted == PlantedTransportBug::DropAnti {
                 msgs.retain(|m| m.sign != Sign::Anti);
                 if msgs.is_empty() {
@@ -316,7 +331,6 @@ impl<M: CellModel> Rank<M> {
                 let last = words.len() / 2;
                 words[last] ^= 1 << 40;
             }
-            self.sent += 1;
             self.stats.batches_sent += 1;
             self.stats.messages_sent += msgs.len() as u64;
             self.stats.bytes_sent += 8 * words.len() as u64;
@@ -372,11 +386,11 @@ impl<M: CellModel> Rank<M> {
         {
             let from = probed.1.source_rank();
             let (words, _) = probed.matched_receive_vec::<u64>();
-            self.received += 1;
             let msgs = match wire::decode_batch(&self.wire, &words) {
                 Ok(m) => m,
                 Err(e) => self.fatal(&format!("a batch from rank {from} does not decode: {e}")),
             };
+            self.received += msgs.len() as u64;
             for m in msgs {
                 match self.local.get(m.dst_world as usize).copied().flatten() {
                     Some(i) => self.worlds[i].receive(m),
@@ -459,7 +473,7 @@ impl<M: CellModel> Rank<M> {
         }
     }
 
-    /// A GVT round (SPEC.md §M): this rank sends nothing more until it ends; receive what
+    /// A GVT round (SPEC.md §14): this rank sends nothing more until it ends; receive what
     /// has arrived, all-gather (sent, received, bound, stop) and repeat until every batch
     /// sent was received. Returns the new GVT; sets `stopped` if rank 0 stopped the run.
     fn gvt_round(&mut self) -> Step {
@@ -478,12 +492,21 @@ impl<M: CellModel> Rank<M> {
             self.comm.all_gather_into(&mine[..], &mut all[..]);
             self.stats.reductions += 1;
             let sum = |k: usize| all.chunks(4).map(|c| c[k]).sum::<u64>();
-            if sum(0) == sum(1) {
+            let (sent, received) = (sum(0), sum(1));
+            if sent == received {
                 self.stopped |= all.chunks(4).any(|c| c[3] != 0);
                 let min = all.chunks(4).map(|c| c[2]).min().unwrap_or(Step::MAX);
                 self.stats.gvt_seconds += started.elapsed().as_secs_f64();
                 let end = self.end.min(self.next_round);
                 return min.min(end + 1).max(self.gvt);
+            }
+            // Every rank stopped sending: what has not arrived by now never will.
+            if started.elapsed() > self.round_timeout {
+                self.fatal(&format!(
+                    "a GVT round waited {:.0} s: {sent} messages were sent between ranks but \
+                     {received} received (lost in transit)",
+                    started.elapsed().as_secs_f64()
+                ));
             }
         }
     }
@@ -615,7 +638,7 @@ impl<M: CellModel> Rank<M> {
         }
     }
 
-    /// A balancing round, if one is due at the committed step (SPEC.md §K13, §M): every rank
+    /// A balancing round, if one is due at the committed step (SPEC.md §K13, §14): every rank
     /// all-gathers the worlds' loads and leads and the whole domain's states at the step, so
     /// every rank's balancer takes the same decision; if cells move, every rank's worlds take
     /// their new territories, send their ghosts again and get the pending inputs again.
