@@ -423,6 +423,13 @@ type Ran<E> = (
     Option<crate::kernel::RunTrace>,
 );
 
+/// A frame sink of [`Runner::run`], as the executors take it.
+type FrameSink<'a, M> = dyn FnMut(
+        &Frame<<M as CellModel>::Event>,
+        Option<&[&<M as CellModel>::State]>,
+        &mut RunControl<'_, <M as CellModel>::State>,
+    ) + 'a;
+
 /// The MPI executor's arm of [`Runner::run`] (rank 0's sink sees the frames; the other ranks'
 /// reports count none).
 #[cfg(feature = "mpi")]
@@ -435,7 +442,7 @@ fn run_on_mpi<M: CellModel>(
     options: &RunOptions,
     steps: u64,
     wanted: StatesWanted,
-    sink: &mut dyn FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+    sink: &mut FrameSink<'_, M>,
 ) -> Result<Ran<M::Event>, ExecError> {
     use crate::exec::mpi::{run_mpi_controlled, MpiOptions, MpiSetup};
     let mut mpi_options = MpiOptions::new(&options.kernel, steps);
@@ -466,7 +473,7 @@ fn run_on_mpi<M: CellModel>(
     _options: &RunOptions,
     _steps: u64,
     _wanted: StatesWanted,
-    _sink: &mut dyn FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+    _sink: &mut FrameSink<'_, M>,
 ) -> Result<Ran<M::Event>, ExecError> {
     Err(crate::exec::error::MpiError::NotBuilt.into())
 }

@@ -30,7 +30,7 @@
 mod rank;
 pub mod wire;
 
-pub use rank::{run_mpi_controlled, MpiOptions, MpiReport, MpiSetup};
+pub use rank::{run_mpi_controlled, MpiOptions, MpiReport, MpiSetup, Sink};
 
 use super::error::MpiError;
 use mpi::environment::Universe;

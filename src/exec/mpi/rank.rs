@@ -35,6 +35,9 @@ const TAG_BATCH: i32 = 17;
 /// Exit code of a rank that aborts the job.
 const ABORT_CODE: i32 = 70;
 
+/// Rank 0's frame sink: each committed frame, the states asked for, the run's control.
+pub type Sink<'a, S, E> = dyn FnMut(&Frame<E>, Option<&[&S]>, &mut RunControl<'_, S>) + 'a;
+
 /// What an MPI run starts from (the same on every rank).
 pub struct MpiSetup<M: CellModel> {
     /// The model.
@@ -119,7 +122,7 @@ struct PendingSend {
 pub fn run_mpi_controlled<M: CellModel>(
     setup: MpiSetup<M>,
     options: &MpiOptions,
-    sink: &mut dyn FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+    sink: &mut Sink<'_, M::State, M::Event>,
 ) -> Result<MpiReport<M::Event>, ExecError> {
     let wire = M::wire().ok_or(MpiError::NoWire)?;
     if options.kernel.trace {
@@ -192,6 +195,7 @@ pub fn run_mpi_controlled<M: CellModel>(
         target: options.steps,
         end: options.steps,
         stopped: false,
+        stop_requested: false,
         gvt_advances: 0,
         balancer,
         next_round: Step::MAX,
@@ -257,7 +261,10 @@ struct Rank<M: CellModel> {
     committed: Step,
     target: Step,
     end: Step,
+    /// Whether every rank knows the run stops (from a GVT round: all ranks alike).
     stopped: bool,
+    /// Rank 0: whether its sink asked to stop (told to every rank at the next round).
+    stop_requested: bool,
     gvt_advances: u64,
     balancer: Balancer,
     next_round: Step,
@@ -444,11 +451,7 @@ impl<M: CellModel> Rank<M> {
 
     /// The run: work, GVT round, commit, until the last step is committed or rank 0's sink
     /// stops the run.
-    fn run(
-        &mut self,
-        wanted: &StatesWanted,
-        sink: &mut dyn FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
-    ) {
+    fn run(&mut self, wanted: &StatesWanted, sink: &mut Sink<'_, M::State, M::Event>) {
         while self.committed < self.target && !self.stopped {
             self.balance_if_due();
             for _ in 0..self.round_actions {
@@ -487,7 +490,8 @@ impl<M: CellModel> Rank<M> {
                 .map(World::bound)
                 .min()
                 .unwrap_or(Step::MAX);
-            let mine = [self.sent, self.received, bound, u64::from(self.stopped)];
+            let stop = self.stopped || self.stop_requested;
+            let mine = [self.sent, self.received, bound, u64::from(stop)];
             let mut all = vec![0u64; 4 * self.ranks];
             self.comm.all_gather_into(&mine[..], &mut all[..]);
             self.stats.reductions += 1;
@@ -517,7 +521,7 @@ impl<M: CellModel> Rank<M> {
         &mut self,
         last: Step,
         wanted: &StatesWanted,
-        sink: &mut dyn FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+        sink: &mut Sink<'_, M::State, M::Event>,
     ) {
         let first = self.committed + 1;
         let root = self.comm.process_at_rank(0);
@@ -589,16 +593,38 @@ impl<M: CellModel> Rank<M> {
     }
 
     /// Rank 0: builds the frames of `first..=last` from its worlds and the other ranks' parts
-    /// and hands them to the sink in step order (until it stops the run).
+    /// and hands them to the sink in step order (until it asks to stop the run).
     fn deliver_frames(
         &mut self,
         first: Step,
         last: Step,
         others: &[Vec<wire::StepPart<M::State, M::Event>>],
         wanted: &StatesWanted,
-        sink: &mut dyn FnMut(&Frame<M::Event>, Option<&[&M::State]>, &mut RunControl<'_, M::State>),
+        sink: &mut Sink<'_, M::State, M::Event>,
     ) {
         for t in first..=last {
+            // Every rank commits the same steps (so the next collectives match); frames after
+            // a stop only reach no sink.
+            if !self.stop_requested {
+                self.deliver_frame(t, first, others, wanted, sink);
+            }
+            for w in &mut self.worlds {
+                w.note_committed(t);
+            }
+            self.committed = t;
+        }
+    }
+
+    /// Rank 0: builds the frame of step `t` and hands it to the sink.
+    fn deliver_frame(
+        &mut self,
+        t: Step,
+        first: Step,
+        others: &[Vec<wire::StepPart<M::State, M::Event>>],
+        wanted: &StatesWanted,
+        sink: &mut Sink<'_, M::State, M::Event>,
+    ) {
+        {
             let k = (t - first) as usize;
             let mut events: Vec<Event<M::Event>> = self
                 .worlds
@@ -625,16 +651,8 @@ impl<M: CellModel> Rank<M> {
             let mut control = RunControl::new(gvt, &mut post).with_probe(&mut probe);
             let wants = wanted.wants(t, frame.hash).then_some(&all[..]);
             sink(&frame, wants, &mut control);
-            let stop = control.stopped();
-            drop(all);
-            for w in &mut self.worlds {
-                w.note_committed(t);
-            }
-            self.committed = t;
-            if stop {
-                self.stopped = true;
-                return;
-            }
+            // Every rank learns of it in the next GVT round and leaves the run there.
+            self.stop_requested |= control.stopped();
         }
     }
 
