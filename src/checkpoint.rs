@@ -39,6 +39,21 @@ pub trait ExactState: Sized {
     fn from_words(words: &[u64]) -> Result<Self, StateDecodeError>;
 }
 
+/// The [`Wire`](crate::model::Wire) of a model whose states are [`ExactState`]: states as
+/// their exact words, event kinds as `event_to_word` and `event_from_word` say
+/// ([`CellModel::wire`](crate::CellModel::wire)).
+pub fn exact_wire<S: ExactState, E>(
+    event_to_word: fn(&E) -> u64,
+    event_from_word: fn(u64) -> Option<E>,
+) -> crate::model::Wire<S, E> {
+    crate::model::Wire {
+        state_to_words: S::to_words,
+        state_from_words: |w| S::from_words(w).map_err(|e| e.to_string()),
+        event_to_word,
+        event_from_word,
+    }
+}
+
 /// Why words do not decode as a state ([`ExactState::from_words`]).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum StateDecodeError {

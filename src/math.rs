@@ -1,5 +1,5 @@
 //! Math types of the hot path: nalgebra `f32` vectors and unit quaternions, the types
-//! parry3d 0.25 uses natively (no conversion per contact pair; see SPEC.md §Math).
+//! parry3d 0.25 uses natively (no conversion per contact pair; see SPEC.md §14ath).
 
 pub use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 

@@ -149,7 +149,38 @@ pub trait CellModel: Send + Sync {
     fn event_name(kind: &Self::Event) -> String {
         format!("{kind:?}")
     }
+
+    /// How states and events travel between processes as exact 64-bit words (the MPI
+    /// executor, SPEC.md §14): `None`, the default, means the model cannot be run across
+    /// processes. A model whose state is [`ExactState`](crate::checkpoint::ExactState)
+    /// builds it with [`exact_wire`](crate::checkpoint::exact_wire).
+    fn wire() -> Option<Wire<Self::State, Self::Event>> {
+        None
+    }
 }
+
+/// A model's states and events as exact 64-bit words, for the MPI executor's messages and
+/// committed frames ([`CellModel::wire`]). Decoding what encoding wrote must give back the
+/// same bits; decoding anything else must fail (an `Err`, a `None`), never give another
+/// state.
+pub struct Wire<S, E> {
+    /// Appends a state's words.
+    pub state_to_words: fn(&S, &mut Vec<u64>),
+    /// Reads a state back from exactly the words `state_to_words` wrote, or says what is wrong.
+    pub state_from_words: fn(&[u64]) -> Result<S, String>,
+    /// An event kind as one word.
+    pub event_to_word: fn(&E) -> u64,
+    /// The event kind of a word `event_to_word` wrote (`None` for any other word).
+    pub event_from_word: fn(u64) -> Option<E>,
+}
+
+impl<S, E> Clone for Wire<S, E> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<S, E> Copy for Wire<S, E> {}
 
 /// An `f32` written so two different bit patterns never look alike: shortest decimal and
 /// the raw bits.

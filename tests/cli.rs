@@ -982,3 +982,11 @@ fn example_models_run_verify_and_experiment_from_the_cli() {
         "{err}"
     );
 }
+
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn the_mpi_executor_asks_for_a_build_with_the_mpi_feature() {
+    let err = fails(&["run", "--executor", "mpi", "--worlds", "2", "--steps", "1"]);
+    assert!(err.contains("--features mpi"), "{err}");
+    assert!(err.contains("mpirun"), "{err}");
+}

@@ -32,7 +32,21 @@ pub fn run(
     if let Err(e) = super::interrupt::install() {
         eprintln!("warning: Ctrl-C will not stop the run cleanly: {e}");
     }
+    // An MPI run: every rank runs this, only rank 0 writes and prints.
+    #[cfg(feature = "mpi")]
+    let session = match options.executor {
+        crate::sim::ExecutorKind::Mpi => Some(crate::exec::mpi::Session::init()?),
+        _ => None,
+    };
+    #[cfg(feature = "mpi")]
+    let root = session.as_ref().is_none_or(|s| s.is_root());
+    #[cfg(not(feature = "mpi"))]
+    let root = true;
+    let checkpoint = checkpoint.filter(|_| root);
     let (report, written) = model.run_from(size, &options, None, steps, checkpoint)?;
+    if !root {
+        return Ok(report);
+    }
     interrupted(&report, checkpoint.map(|c| c.path.as_path()), written);
     if let (Some(path), Some(t)) = (trace, &report.trace) {
         super::atomic::write(path, serde_json::to_string(t)?.as_bytes())?;

@@ -19,6 +19,9 @@ pub enum ExecutorArg {
     Virtual,
     /// OS threads run the worlds, the laggard (at equal step the heaviest) first.
     Threaded,
+    /// The worlds spread over the ranks of an MPI job: `mpirun -np R soda run --executor mpi
+    /// --worlds W` (a soda built with `--features mpi`).
+    Mpi,
 }
 
 /// `--mode` values.
@@ -85,7 +88,7 @@ impl From<PartitionArg> for PartitionKind {
 #[derive(Debug, Clone, Args)]
 #[command(next_help_heading = "Executor")]
 pub struct ExecutorArgs {
-    /// The executor: all three commit bit-identical states.
+    /// The executor: all commit bit-identical states.
     #[arg(long, value_enum, default_value = "reference")]
     pub executor: ExecutorArg,
     /// Number of worlds (logical processes) [default: the thread count for `threaded`
@@ -234,7 +237,11 @@ impl ExecutorArgs {
             ExecutorArg::Reference => ExecutorKind::Reference,
             ExecutorArg::Virtual => ExecutorKind::Virtual,
             ExecutorArg::Threaded => ExecutorKind::Threaded,
+            ExecutorArg::Mpi => ExecutorKind::Mpi,
         };
+        if executor == ExecutorKind::Mpi && !cfg!(feature = "mpi") {
+            bail!("{}", soda::exec::error::MpiError::NotBuilt);
+        }
         if executor != ExecutorKind::Virtual {
             if let Some((flag, _)) = virtual_flags.iter().find(|f| f.1) {
                 bail!(

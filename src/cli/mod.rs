@@ -6,6 +6,7 @@
 mod checkpoint;
 mod exec_args;
 mod experiment;
+mod mpi;
 mod numbers;
 mod output;
 mod plan;

@@ -118,6 +118,21 @@ pub struct OutputArgs {
     pub territories: Option<PathBuf>,
 }
 
+impl OutputArgs {
+    /// No output at all (an MPI run's ranks other than 0).
+    fn none() -> Self {
+        OutputArgs {
+            record: None,
+            record_every: 1,
+            json: false,
+            counters: None,
+            csv: None,
+            trace: None,
+            territories: None,
+        }
+    }
+}
+
 /// The output files of a run, checked (and the streamed or held ones opened under their
 /// temporary names) before step 1.
 struct Outputs {
@@ -296,6 +311,15 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
              has none; add --executor virtual or --executor threaded"
         );
     }
+    // Under MPI every rank runs this; only rank 0 writes outputs and prints.
+    let role = super::mpi::Role::of(&options)?;
+    let quiet_outputs;
+    let (output, checkpoint) = if role.root() {
+        (output, checkpoint)
+    } else {
+        quiet_outputs = OutputArgs::none();
+        (&quiet_outputs, None)
+    };
     let first_step = from.as_ref().map_or(0, |f| f.step);
     if last_step < first_step {
         bail!(
@@ -390,7 +414,7 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         wanted.every = gcd(wanted.every, c.every());
         wanted.step = Some(last_step);
     }
-    let progress = progress_bar(output.json, steps, initial.len());
+    let progress = progress_bar(output.json || !role.root(), steps, initial.len());
     let from = from.map(|f| ResumeFrom {
         step: f.step,
         bodies: initial,
@@ -428,6 +452,9 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
     )
     .with_context(|| format!("the {} executor failed", options.executor.name()))?;
     progress.finish_and_clear();
+    if !role.root() {
+        return Ok(());
+    }
     // From here on a failed write does not lose the run: the summary and hash are printed
     // first, then the errors.
     let mut failures: Vec<anyhow::Error> = Vec::new();

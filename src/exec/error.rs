@@ -46,6 +46,34 @@ pub enum ExecError {
     /// A worker thread died outside a world's step.
     #[error("worker thread failed: {0}")]
     Thread(#[from] ThreadPanicked),
+    /// The MPI executor cannot run this (SPEC.md §14).
+    #[error("{0}")]
+    Mpi(#[from] MpiError),
+}
+
+/// Why the MPI executor cannot run (SPEC.md §14). Faults during an MPI run (a panic, a
+/// message that does not decode) stop every rank with `MPI_Abort` instead: the others could
+/// not go on.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+pub enum MpiError {
+    /// This build has no MPI executor.
+    #[error(
+        "this soda was built without the MPI executor: rebuild with `cargo build --release \
+         --features mpi` (after scripts/install-mpi-deps.sh) and start it under `mpirun`"
+    )]
+    NotBuilt,
+    /// The model has no [`Wire`](crate::model::Wire) to send its states between processes.
+    #[error(
+        "this model cannot run across processes: its CellModel::wire is None (give it one, \
+         e.g. with soda::checkpoint::exact_wire)"
+    )]
+    NoWire,
+    /// MPI could not be initialised (or was finalised already: one MPI run per process).
+    #[error("MPI could not be initialised (it was already finalised in this process)")]
+    Init,
+    /// A kernel option the MPI executor does not support.
+    #[error("{0} is not supported by the MPI executor")]
+    Unsupported(&'static str),
 }
 
 /// Why a schedule string ([`parse_schedule`]) does not parse.
@@ -91,6 +119,13 @@ pub enum InputError {
         step: Step,
         /// The entity.
         id: BodyId,
+    },
+    /// An input posted while an MPI run is going (the MPI executor takes only the inputs
+    /// scheduled before the run: every rank must post the same).
+    #[error("an input at step {step} posted during an MPI run is refused: schedule inputs before the run (an input script)")]
+    DuringMpiRun {
+        /// The input's step.
+        step: Step,
     },
     /// An added entity's home position lies outside the grid.
     #[error("an input at step {step} adds entity {id} at {position:?}, outside the grid")]

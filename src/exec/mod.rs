@@ -7,6 +7,8 @@ pub mod control;
 pub mod error;
 pub mod live;
 mod load;
+#[cfg(feature = "mpi")]
+pub mod mpi;
 pub mod reference;
 mod schedule;
 pub mod sync;

@@ -327,6 +327,20 @@ impl CellModel for Epidemic {
         f
     }
 
+    fn wire() -> Option<crate::model::Wire<Agent, EpidemicEvent>> {
+        const KINDS: [EpidemicEvent; 5] = [
+            EpidemicEvent::Infected,
+            EpidemicEvent::Recovered,
+            EpidemicEvent::Died,
+            EpidemicEvent::Born,
+            EpidemicEvent::LeftGrid,
+        ];
+        Some(crate::checkpoint::exact_wire(
+            |e| KINDS.iter().position(|k| k == e).unwrap_or(KINDS.len()) as u64,
+            |w| KINDS.get(usize::try_from(w).ok()?).copied(),
+        ))
+    }
+
     fn event_name(kind: &EpidemicEvent) -> String {
         match kind {
             EpidemicEvent::Infected => "infected",

@@ -126,6 +126,13 @@ impl CellModel for Phold {
         j.pos
     }
 
+    fn wire() -> Option<crate::model::Wire<Job, PholdEvent>> {
+        Some(crate::checkpoint::exact_wire(
+            |_| 0,
+            |w| (w == 0).then_some(crate::frame::LeftGrid),
+        ))
+    }
+
     fn step_cell(
         &self,
         step: Step,

@@ -735,6 +735,20 @@ impl CellModel for RigidBodyModel {
         kind.name().to_string()
     }
 
+    fn wire() -> Option<crate::model::Wire<Body, EventKind>> {
+        Some(crate::checkpoint::exact_wire(
+            |e| match e {
+                EventKind::SpeedCapped => 0,
+                EventKind::LeftDomain => 1,
+            },
+            |w| match w {
+                0 => Some(EventKind::SpeedCapped),
+                1 => Some(EventKind::LeftDomain),
+                _ => None,
+            },
+        ))
+    }
+
     fn fields(b: &Body) -> Vec<(String, String)> {
         let q = b.rotation.quaternion();
         let named = [

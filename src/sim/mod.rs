@@ -10,7 +10,7 @@ mod rigid;
 mod runner;
 
 pub use options::{ExecutorKind, RunOptions, UnknownExecutor};
-pub use report::{KernelReport, ModelReport};
+pub use report::{KernelReport, ModelReport, MpiStats};
 pub use rigid::{
     measure, measure_state, run_scene, run_scene_controlled, run_scene_from, ResumeFrom, RunReport,
     Simulation, StateReport,

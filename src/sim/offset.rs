@@ -62,4 +62,8 @@ impl<M: CellModel> CellModel for Offset<M> {
     fn event_name(kind: &Self::Event) -> String {
         M::event_name(kind)
     }
+
+    fn wire() -> Option<crate::model::Wire<Self::State, Self::Event>> {
+        M::wire()
+    }
 }

@@ -17,6 +17,9 @@ pub enum ExecutorKind {
     Virtual,
     /// OS threads run the worlds as tasks, the laggard (at equal step the heaviest) first.
     Threaded,
+    /// The worlds spread over the ranks of an MPI job (cargo feature `mpi`; run under
+    /// `mpirun`; SPEC.md §14). Not in [`ExecutorKind::ALL`]: it needs MPI.
+    Mpi,
 }
 
 impl ExecutorKind {
@@ -29,6 +32,7 @@ impl ExecutorKind {
             Self::Reference => "reference",
             Self::Virtual => "virtual",
             Self::Threaded => "threaded",
+            Self::Mpi => "mpi",
         }
     }
 }
@@ -41,7 +45,7 @@ impl fmt::Display for ExecutorKind {
 
 /// An executor name that is none of `reference`, `virtual`, `threaded`.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("`{0}` is not an executor: use reference, virtual or threaded")]
+#[error("`{0}` is not an executor: use reference, virtual, threaded or mpi")]
 pub struct UnknownExecutor(pub String);
 
 impl FromStr for ExecutorKind {
@@ -52,6 +56,7 @@ impl FromStr for ExecutorKind {
             "reference" => Ok(Self::Reference),
             "virtual" => Ok(Self::Virtual),
             "threaded" => Ok(Self::Threaded),
+            "mpi" => Ok(Self::Mpi),
             other => Err(UnknownExecutor(other.to_string())),
         }
     }

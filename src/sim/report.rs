@@ -65,4 +65,29 @@ pub struct KernelReport {
     /// The balancing rounds: step, loads, imbalance, cells moved, famines (owner maps are
     /// kept in memory for charts, not written to JSON).
     pub balance_rounds: Vec<crate::kernel::RoundRecord>,
+    /// Transport and GVT statistics of an MPI run (absent for the other executors).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mpi: Option<MpiStats>,
+}
+
+/// What an MPI run's ranks sent each other and what its GVT rounds cost (SPEC.md §14),
+/// summed over ranks.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct MpiStats {
+    /// Ranks of the job.
+    pub ranks: usize,
+    /// GVT rounds (each one or more all-gathers, until every batch sent was received).
+    pub gvt_rounds: u64,
+    /// All-gathers of the GVT rounds.
+    pub reductions: u64,
+    /// Batches of kernel messages sent between ranks.
+    pub batches_sent: u64,
+    /// Kernel messages in them (ghosts, migrations, anti- and null messages).
+    pub messages_sent: u64,
+    /// Their bytes.
+    pub bytes_sent: u64,
+    /// Bytes of committed states and events sent to rank 0.
+    pub commit_bytes: u64,
+    /// Wall time in GVT rounds, s (the slowest rank's).
+    pub gvt_seconds: f64,
 }

@@ -274,6 +274,16 @@ impl<M: CellModel + 'static> Runner<M> {
                 );
                 (Some(kernel), report.initial_events, report.trace)
             }
+            ExecutorKind::Mpi => run_on_mpi(
+                model,
+                grid,
+                initial,
+                inputs,
+                &options,
+                steps,
+                wanted,
+                &mut on_frame,
+            )?,
         };
         let wall = start.elapsed().as_secs_f64();
         Ok(tally.report(&options, wall, &initial_events, kernel, trace))
@@ -404,5 +414,69 @@ fn kernel_report(
         thread_times,
         balance: options.kernel.balance.clone(),
         balance_rounds,
+        mpi: None,
     }
+}
+
+/// What an executor arm of [`Runner::run`] yields: the kernel's report, the initial events
+/// and the trace.
+type Ran<E> = (
+    Option<KernelReport>,
+    Vec<Event<E>>,
+    Option<crate::kernel::RunTrace>,
+);
+
+/// A frame sink of [`Runner::run`], as the executors take it.
+type FrameSink<'a, M> = dyn FnMut(
+        &Frame<<M as CellModel>::Event>,
+        Option<&[&<M as CellModel>::State]>,
+        &mut RunControl<'_, <M as CellModel>::State>,
+    ) + 'a;
+
+/// The MPI executor's arm of [`Runner::run`] (rank 0's sink sees the frames; the other ranks'
+/// reports count none).
+#[cfg(feature = "mpi")]
+#[allow(clippy::too_many_arguments)]
+fn run_on_mpi<M: CellModel>(
+    model: M,
+    grid: Grid,
+    initial: Vec<M::State>,
+    inputs: Vec<(Step, Input<M::State>)>,
+    options: &RunOptions,
+    steps: u64,
+    wanted: StatesWanted,
+    sink: &mut FrameSink<'_, M>,
+) -> Result<Ran<M::Event>, ExecError> {
+    use crate::exec::mpi::{run_mpi_controlled, MpiOptions, MpiSetup};
+    let mut mpi_options = MpiOptions::new(&options.kernel, steps);
+    mpi_options.wanted = wanted;
+    let report = run_mpi_controlled(
+        MpiSetup {
+            model,
+            grid,
+            initial,
+            inputs,
+        },
+        &mpi_options,
+        sink,
+    )?;
+    let mut kernel = kernel_report(options, 1, None, report.counters, None, report.balance);
+    kernel.mpi = Some(report.stats);
+    Ok((Some(kernel), report.initial_events, None))
+}
+
+/// Without the `mpi` feature: the error that says to rebuild with it.
+#[cfg(not(feature = "mpi"))]
+#[allow(clippy::too_many_arguments)]
+fn run_on_mpi<M: CellModel>(
+    _model: M,
+    _grid: Grid,
+    _initial: Vec<M::State>,
+    _inputs: Vec<(Step, Input<M::State>)>,
+    _options: &RunOptions,
+    _steps: u64,
+    _wanted: StatesWanted,
+    _sink: &mut FrameSink<'_, M>,
+) -> Result<Ran<M::Event>, ExecError> {
+    Err(crate::exec::error::MpiError::NotBuilt.into())
 }

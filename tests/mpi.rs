@@ -1,0 +1,317 @@
+//! The MPI executor (cargo feature `mpi`; SPEC.md §14): `mpirun -np 2/3/4 soda run --executor
+//! mpi` commits the reference's hash on every built-in scene and rollback mode with random
+//! partitions, with balancing across ranks, inputs and the registered models; rank 0 alone
+//! writes the outputs; a planted fault in the transport is caught, and a rank that panics
+//! stops every rank within seconds, naming the rank and the step.
+//!
+//! Needs Open MPI (`scripts/install-mpi-deps.sh`): `cargo test --release --features mpi --test
+//! mpi`. Scenes are small and runs short (the whole file takes well under a minute on two
+//! cores).
+#![cfg(feature = "mpi")]
+
+mod cli_support;
+
+use cli_support::{hash_line, ok, stderr, stdout};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+/// Runs `mpirun -np ranks soda args` (as root if need be, more ranks than cores allowed).
+fn mpirun(ranks: usize, args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut cmd = Command::new("mpirun");
+    cmd.args(["--allow-run-as-root", "--oversubscribe", "-np"])
+        .arg(ranks.to_string())
+        .arg(env!("CARGO_BIN_EXE_soda"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"));
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.output()
+        .expect("mpirun runs (scripts/install-mpi-deps.sh installs it)")
+}
+
+/// Runs under MPI and expects success; returns stdout.
+fn mpi_ok(ranks: usize, args: &[&str]) -> String {
+    let o = mpirun(ranks, args, &[]);
+    assert!(
+        o.status.success(),
+        "mpirun -np {ranks} soda {args:?} failed ({}):\n{}",
+        o.status,
+        stderr(&o)
+    );
+    stdout(&o)
+}
+
+/// The summary's hash line of `out`.
+fn hash(out: &str) -> String {
+    hash_line(out).unwrap_or_else(|| panic!("no hash line in:\n{out}"))
+}
+
+#[test]
+fn every_scene_and_mode_commits_the_reference_hash_on_2_3_and_4_ranks() {
+    let scenes = [
+        "falling-cubes",
+        "sparse-gas",
+        "dense-pile",
+        "skewed",
+        "chain",
+        "peak",
+    ];
+    let modes = ["cell", "world", "conservative"];
+    let mut run = 0usize;
+    for scene in scenes {
+        let base = ["run", "--scene", scene, "--objects", "120", "--steps", "30"];
+        let reference = hash(&ok(&base));
+        for mode in modes {
+            let ranks = 2 + run % 3;
+            let worlds = (ranks + 1 + run % 4).to_string();
+            let seed = run.to_string();
+            let mut args = base.to_vec();
+            args.extend([
+                "--executor",
+                "mpi",
+                "--worlds",
+                &worlds,
+                "--mode",
+                mode,
+                "--partition",
+                "random",
+                "--partition-seed",
+                &seed,
+            ]);
+            if run % 2 == 1 {
+                args.extend(["--ghosts", "full"]);
+            }
+            let got = hash(&mpi_ok(ranks, &args));
+            assert_eq!(got, reference, "{scene}, {mode}, {ranks} ranks: {args:?}");
+            run += 1;
+        }
+    }
+}
+
+#[test]
+fn balancing_across_ranks_commits_the_reference_hash() {
+    let base = [
+        "run",
+        "--scene",
+        "skewed",
+        "--objects",
+        "200",
+        "--steps",
+        "40",
+    ];
+    let reference = hash(&ok(&base));
+    for (ranks, mode) in [(2, "cell"), (3, "world"), (4, "conservative")] {
+        let mut args = base.to_vec();
+        args.extend([
+            "--executor",
+            "mpi",
+            "--worlds",
+            "6",
+            "--mode",
+            mode,
+            "--balance",
+            "on",
+            "--balance-period",
+            "8",
+            "--json",
+        ]);
+        let out = mpi_ok(ranks, &args);
+        let report: serde_json::Value = serde_json::from_str(&out).expect("--json prints JSON");
+        assert_eq!(report["hash"].as_str(), Some(reference.as_str()));
+        let kernel = &report["kernel"];
+        assert!(
+            kernel["counters"]["balance"]["rounds"].as_u64().unwrap() >= 3,
+            "{kernel}"
+        );
+        assert_eq!(kernel["mpi"]["ranks"], ranks);
+    }
+}
+
+#[test]
+fn registered_models_and_inputs_commit_the_reference_hash() {
+    for model in ["epidemic", "phold"] {
+        let base = [
+            "run",
+            "--model",
+            model,
+            "--entities",
+            "300",
+            "--steps",
+            "30",
+        ];
+        let reference = hash(&ok(&base));
+        let mut args = base.to_vec();
+        args.extend([
+            "--executor",
+            "mpi",
+            "--worlds",
+            "5",
+            "--partition",
+            "random",
+        ]);
+        assert_eq!(hash(&mpi_ok(3, &args)), reference, "{model}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("in.toml");
+    std::fs::write(
+        &script,
+        "[[inputs]]\nstep = 10\naction = \"push\"\nid = 3\nimpulse = [0.0, 8.0, 2.0]\n\n\
+         [[inputs]]\nstep = 15\naction = \"remove\"\nid = 7\n",
+    )
+    .unwrap();
+    let script = script.to_str().unwrap();
+    let base = [
+        "run",
+        "--objects",
+        "150",
+        "--steps",
+        "30",
+        "--inputs",
+        script,
+    ];
+    let reference = hash(&ok(&base));
+    let mut args = base.to_vec();
+    args.extend(["--executor", "mpi", "--worlds", "4"]);
+    assert_eq!(hash(&mpi_ok(2, &args)), reference);
+}
+
+#[test]
+fn rank_0_alone_writes_the_record_and_the_counters() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (reference_csv, mpi_csv, counters) = (path("ref.csv"), path("mpi.csv"), path("c.json"));
+    let base = [
+        "run",
+        "--objects",
+        "100",
+        "--steps",
+        "20",
+        "--record-every",
+        "5",
+    ];
+    let mut args = base.to_vec();
+    args.extend(["--record", &reference_csv]);
+    let reference = hash(&ok(&args));
+    let mut args = base.to_vec();
+    args.extend([
+        "--record",
+        &mpi_csv,
+        "--counters",
+        &counters,
+        "--executor",
+        "mpi",
+        "--worlds",
+        "3",
+    ]);
+    let out = mpi_ok(3, &args);
+    assert_eq!(hash(&out), reference);
+    // One summary (rank 0's), the same recording to the byte, one report.
+    assert_eq!(out.matches("hash ").count(), 1, "{out}");
+    assert_eq!(
+        std::fs::read(&mpi_csv).unwrap(),
+        std::fs::read(&reference_csv).unwrap()
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&counters).unwrap()).unwrap();
+    assert_eq!(report["executor"], "mpi");
+    assert_eq!(report["kernel"]["worlds"], 3);
+    assert!(report["kernel"]["mpi"]["batches_sent"].as_u64().unwrap() > 0);
+    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert_eq!(names.len(), 3, "no temporary file left behind");
+}
+
+/// Runs a planted fault and expects every rank to stop soon with an error.
+fn fails_soon(ranks: usize, args: &[&str], bug: &str) -> String {
+    let started = Instant::now();
+    let o = mpirun(ranks, args, &[("SODA_MPI_PLANTED_BUG", bug)]);
+    assert!(
+        started.elapsed() < Duration::from_secs(30),
+        "the ranks took {:?} to stop",
+        started.elapsed()
+    );
+    assert!(!o.status.success(), "{bug}: the run did not fail");
+    stderr(&o)
+}
+
+#[test]
+fn a_damaged_batch_stops_every_rank_with_an_error() {
+    let args = [
+        "run",
+        "--objects",
+        "200",
+        "--steps",
+        "30",
+        "--executor",
+        "mpi",
+        "--worlds",
+        "4",
+    ];
+    let err = fails_soon(2, &args, "corrupt");
+    assert!(err.contains("does not decode"), "{err}");
+    assert!(err.contains("checksum"), "{err}");
+    assert!(err.contains("MPI rank "), "{err}");
+}
+
+#[test]
+fn a_panicking_rank_stops_every_rank_naming_the_rank_and_step() {
+    let args = [
+        "run",
+        "--objects",
+        "200",
+        "--steps",
+        "60",
+        "--executor",
+        "mpi",
+        "--worlds",
+        "4",
+    ];
+    let err = fails_soon(3, &args, "panic:1:10");
+    assert!(err.contains("MPI rank 1 of 3"), "{err}");
+    assert!(
+        err.contains("panicked while computing from step 1"),
+        "{err}"
+    );
+    assert!(err.contains("planted panic"), "{err}");
+}
+
+#[test]
+fn lost_anti_messages_stop_every_rank_with_an_error() {
+    // Random territories: rollbacks send anti-messages between ranks, and the planted fault
+    // loses every one of them (counted as sent, never sent). The next GVT round finds them
+    // missing and, after its timeout, stops the run instead of waiting forever.
+    let args = [
+        "run",
+        "--scene",
+        "peak",
+        "--objects",
+        "200",
+        "--steps",
+        "80",
+        "--executor",
+        "mpi",
+        "--worlds",
+        "8",
+        "--partition",
+        "random",
+        "--window",
+        "32",
+    ];
+    let started = Instant::now();
+    let o = mpirun(
+        2,
+        &args,
+        &[
+            ("SODA_MPI_PLANTED_BUG", "drop-anti"),
+            ("SODA_MPI_ROUND_TIMEOUT", "2"),
+        ],
+    );
+    assert!(started.elapsed() < Duration::from_secs(30));
+    let err = stderr(&o);
+    assert!(
+        !o.status.success(),
+        "the lost anti-messages went unnoticed:\n{err}"
+    );
+    assert!(err.contains("lost in transit"), "{err}");
+    assert!(err.contains("aborting every rank"), "{err}");
+}
