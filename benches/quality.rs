@@ -329,8 +329,8 @@ fn main() {
             measure: settled,
         },
     ];
-    let wanted_cases = list_from_env("QUALITY_CASES");
-    let wanted_engines = list_from_env("QUALITY_ENGINES");
+    let wanted_cases = knobs::list("QUALITY_CASES");
+    let wanted_engines = knobs::list("QUALITY_ENGINES");
     for w in wanted_cases.iter().flatten() {
         assert!(
             cases.iter().any(|c| c.name == w),
@@ -418,16 +418,6 @@ fn main() {
         .unwrap_or_else(|e| panic!("writing {}: {e}", path.display()));
         println!("written to {}", path.display());
     }
-}
-
-/// A comma-separated, lower-cased list from the environment variable `name`, if it is set.
-fn list_from_env(name: &str) -> Option<Vec<String>> {
-    std::env::var(name).ok().map(|v| {
-        v.split(',')
-            .map(|s| s.trim().to_lowercase())
-            .filter(|s| !s.is_empty())
-            .collect()
-    })
 }
 
 /// Four significant digits, plain.

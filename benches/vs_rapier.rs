@@ -232,9 +232,8 @@ fn sizes(full: bool) -> Vec<usize> {
 
 /// Which engines run: `SODA_BENCH_ENGINES` (`soda`, `rapier` or both, comma-separated).
 fn engines() -> (bool, bool) {
-    match std::env::var("SODA_BENCH_ENGINES") {
-        Ok(v) => {
-            let names: Vec<String> = v.split(',').map(|s| s.trim().to_lowercase()).collect();
+    match knobs::list("SODA_BENCH_ENGINES") {
+        Some(names) => {
             for n in &names {
                 assert!(
                     n == "soda" || n == "rapier",
@@ -246,7 +245,7 @@ fn engines() -> (bool, bool) {
                 names.iter().any(|n| n == "rapier"),
             )
         }
-        Err(_) => (true, true),
+        None => (true, true),
     }
 }
 

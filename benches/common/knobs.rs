@@ -20,6 +20,19 @@ pub fn env(name: &str, default: u64, quick_value: u64) -> u64 {
         .unwrap_or(default)
 }
 
+/// The comma-separated, lower-cased list in the environment variable `name`, if it is set
+/// (empty items dropped): which cases or engines a bench runs. Not every bench that includes
+/// this file filters.
+#[allow(dead_code)]
+pub fn list(name: &str) -> Option<Vec<String>> {
+    std::env::var(name).ok().map(|v| {
+        v.split(',')
+            .map(|s| s.trim().to_lowercase())
+            .filter(|s| !s.is_empty())
+            .collect()
+    })
+}
+
 /// The median of `v` (the mean of the middle two for an even count).
 pub fn median(v: &[f64]) -> f64 {
     let mut s = v.to_vec();
