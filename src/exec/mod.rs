@@ -234,6 +234,30 @@ pub(crate) fn balance_round<'a, M: CellModel + 'a>(
     Some(take_territories(grid, &mut worlds, new, step))
 }
 
+/// What the worlds send when they start again after a balancing round moved cells at
+/// committed step `step` (every message in transit was discarded): each world's
+/// [`World::start`] messages, in world order, and the inputs posted for steps after `step`,
+/// which must be delivered again to every world. The same on every executor.
+pub(crate) struct Restart<S> {
+    /// The worlds' start messages, world by world.
+    pub started: Vec<crate::kernel::Message<S>>,
+    /// The inputs still ahead of `step`, in the order they were posted.
+    pub pending_inputs: Vec<crate::kernel::Message<S>>,
+}
+
+/// Starts `worlds` again after a balancing round that moved cells at `step` (see
+/// [`Restart`]); `posted` is every input message posted so far, in posting order.
+pub(crate) fn restart_worlds<'a, M: CellModel + 'a>(
+    worlds: impl IntoIterator<Item = &'a mut World<M>>,
+    posted: &[crate::kernel::Message<M::State>],
+    step: Step,
+) -> Restart<M::State> {
+    Restart {
+        started: worlds.into_iter().flat_map(|w| w.start()).collect(),
+        pending_inputs: posted.iter().filter(|m| m.step > step).cloned().collect(),
+    }
+}
+
 /// The opening balancing round at step 0 ([`Balancer::opening_round`]): loads estimated from
 /// the bodies, nothing computed yet. Returns the new partition if cells moved; the caller
 /// then lets the worlds [`World::start`] (again).

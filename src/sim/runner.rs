@@ -275,10 +275,12 @@ impl<M: CellModel + 'static> Runner<M> {
                 (Some(kernel), report.initial_events, report.trace)
             }
             ExecutorKind::Mpi => run_on_mpi(
-                model,
-                grid,
-                initial,
-                inputs,
+                MpiStart {
+                    model,
+                    grid,
+                    initial,
+                    inputs,
+                },
                 &options,
                 steps,
                 wanted,
@@ -433,15 +435,21 @@ type FrameSink<'a, M> = dyn FnMut(
         &mut RunControl<'_, <M as CellModel>::State>,
     ) + 'a;
 
-/// The MPI executor's arm of [`Runner::run`] (rank 0's sink sees the frames; the other ranks'
-/// reports count none).
-#[cfg(feature = "mpi")]
-#[allow(clippy::too_many_arguments)]
-fn run_on_mpi<M: CellModel>(
+/// What the MPI executor's arm of [`Runner::run`] starts from (the same on every rank).
+/// Without the `mpi` feature the arm only reports that it is not built, reading none of it.
+#[cfg_attr(not(feature = "mpi"), allow(dead_code))]
+struct MpiStart<M: CellModel> {
     model: M,
     grid: Grid,
     initial: Vec<M::State>,
     inputs: Vec<(Step, Input<M::State>)>,
+}
+
+/// The MPI executor's arm of [`Runner::run`] (rank 0's sink sees the frames; the other ranks'
+/// reports count none).
+#[cfg(feature = "mpi")]
+fn run_on_mpi<M: CellModel>(
+    start: MpiStart<M>,
     options: &RunOptions,
     steps: u64,
     wanted: StatesWanted,
@@ -452,10 +460,10 @@ fn run_on_mpi<M: CellModel>(
     mpi_options.wanted = wanted;
     let report = run_mpi_controlled(
         MpiSetup {
-            model,
-            grid,
-            initial,
-            inputs,
+            model: start.model,
+            grid: start.grid,
+            initial: start.initial,
+            inputs: start.inputs,
         },
         &mpi_options,
         sink,
@@ -467,12 +475,8 @@ fn run_on_mpi<M: CellModel>(
 
 /// Without the `mpi` feature: the error that says to rebuild with it.
 #[cfg(not(feature = "mpi"))]
-#[allow(clippy::too_many_arguments)]
 fn run_on_mpi<M: CellModel>(
-    _model: M,
-    _grid: Grid,
-    _initial: Vec<M::State>,
-    _inputs: Vec<(Step, Input<M::State>)>,
+    _start: MpiStart<M>,
     _options: &RunOptions,
     _steps: u64,
     _wanted: StatesWanted,

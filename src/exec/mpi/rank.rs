@@ -585,11 +585,16 @@ impl<M: CellModel> Rank<M> {
             return;
         }
         for t in first..=last {
-            for w in &mut self.worlds {
-                w.note_committed(t);
-            }
+            self.note_committed(t);
         }
-        self.committed = last;
+    }
+
+    /// Every local world notes step `t` as committed (in step order, as the frames go).
+    fn note_committed(&mut self, t: Step) {
+        for w in &mut self.worlds {
+            w.note_committed(t);
+        }
+        self.committed = t;
     }
 
     /// Rank 0: builds the frames of `first..=last` from its worlds and the other ranks' parts
@@ -608,10 +613,7 @@ impl<M: CellModel> Rank<M> {
             if !self.stop_requested {
                 self.deliver_frame(t, first, others, wanted, sink);
             }
-            for w in &mut self.worlds {
-                w.note_committed(t);
-            }
-            self.committed = t;
+            self.note_committed(t);
         }
     }
 
@@ -711,17 +713,9 @@ impl<M: CellModel> Rank<M> {
             for w in &mut self.worlds {
                 w.reterritory(new.clone(), &states, step);
             }
-            for i in 0..self.worlds.len() {
-                let msgs = self.worlds[i].start();
-                self.route(msgs);
-            }
-            let pending: Vec<Message<M::State>> = self
-                .inputs_posted
-                .iter()
-                .filter(|m| m.step > step)
-                .cloned()
-                .collect();
-            for m in &pending {
+            let restart = crate::exec::restart_worlds(&mut self.worlds, &self.inputs_posted, step);
+            self.route(restart.started);
+            for m in &restart.pending_inputs {
                 self.post_input(m);
             }
             self.flush();

@@ -213,20 +213,16 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
                 inbox.lock().clear();
                 shared.inbox_min[w].store(u64::MAX);
             }
-            let pending: Vec<Message<M::State>> = shared
-                .inputs
-                .lock()
-                .posted
-                .iter()
-                .filter(|m| m.step > committed)
-                .cloned()
-                .collect();
-            let reposted = pending
+            let restart = crate::exec::restart_worlds(
+                locked.iter_mut().map(|s| &mut s.world),
+                &shared.inputs.lock().posted,
+                committed,
+            );
+            let reposted = restart
+                .pending_inputs
                 .iter()
                 .flat_map(|m| crate::exec::to_every_world(m, n));
-            let started: Vec<Message<M::State>> =
-                locked.iter_mut().flat_map(|s| s.world.start()).collect();
-            for m in started.into_iter().chain(reposted) {
+            for m in restart.started.into_iter().chain(reposted) {
                 let d = m.dst_world as usize;
                 let affects = m.affects();
                 shared.inboxes[d].lock().push(m);

@@ -304,17 +304,9 @@ impl<M: CellModel> VirtualRun<M> {
             self.bounds.iter_mut().for_each(|b| *b = None);
             self.pool.clear();
             self.in_flight.clear();
-            for w in 0..self.worlds.len() {
-                let msgs = self.worlds[w].start();
-                self.post(msgs);
-            }
-            let pending: Vec<Message<M::State>> = self
-                .inputs_posted
-                .iter()
-                .filter(|m| m.step > step)
-                .cloned()
-                .collect();
-            for m in pending {
+            let restart = super::restart_worlds(&mut self.worlds, &self.inputs_posted, step);
+            self.post(restart.started);
+            for m in restart.pending_inputs {
                 let copies = super::to_every_world(&m, self.worlds.len()).collect();
                 self.deliver_inputs(copies);
             }
