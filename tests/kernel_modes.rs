@@ -258,3 +258,45 @@ fn delta_ghosts_under_adversarial_schedules_of_a_landing_pile_commit_the_referen
             .unwrap_or_else(|e| panic!("{mode:?}: {e}"));
     }
 }
+
+/// A live display sees where rollbacks reached: every world's per-cell counts of
+/// re-executed computations (`WorldStatus::cell_recomputes`, one per own cell) add up to its
+/// `cells_recomputed`, and on a run that rolls back, some cells have non-zero counts.
+#[test]
+fn live_status_counts_recomputations_per_cell_summing_to_the_worlds_counts() {
+    use soda::exec::live::LiveStatus;
+    let s = builtin("sparse-gas", Some(64), 3).unwrap();
+    let cfg = KernelConfig::new(5)
+        .mode(RollbackMode::Cell)
+        .partition(PartitionKind::Random)
+        .window(64);
+    let (mut run, _) = VirtualRun::new(
+        s.model(),
+        s.grid(),
+        s.initial_bodies(),
+        &cfg,
+        &VirtualOptions::seeded(3),
+    );
+    let mut last: Option<LiveStatus> = None;
+    run.run_controlled(40, &Default::default(), |_, _, c| {
+        last = c.live_status();
+    })
+    .unwrap();
+    let live = last.expect("the virtual executor shows its live status");
+    let cells = s.grid().cell_count();
+    let per_cell = live.recomputes(cells);
+    let mut recomputed = 0;
+    for w in &live.worlds {
+        assert_eq!(w.cell_recomputes.len(), w.cells.len());
+        assert_eq!(w.cell_recomputes.iter().sum::<u64>(), w.cells_recomputed);
+        for (&c, &n) in w.cells.iter().zip(&w.cell_recomputes) {
+            assert_eq!(per_cell[c as usize], n);
+        }
+        recomputed += w.cells_recomputed;
+    }
+    assert!(
+        recomputed > 0,
+        "the run rolled back no cell: pick a schedule that does"
+    );
+    assert_eq!(per_cell.iter().sum::<u64>(), recomputed);
+}

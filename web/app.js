@@ -36,7 +36,7 @@ let boxes = null, balls = null;           // InstancedMesh, grown as needed
 let boxIds = [], ballIds = [];            // instance index -> body id
 let flashMesh = null;                     // cells flashing after a rollback
 const flash = new Map();                  // cell -> intensity
-let lastRollbacks = null;
+let lastRecomputes = null, lastOwners = null;   // per cell, in the frame drawn before
 
 // World colours, made once per (world, asleep): a frame of 8,000 bodies allocates none.
 const colours = new Map();
@@ -124,7 +124,7 @@ let pending = null;     // the latest frame received, not yet drawn
 function decode(buffer) {
   const v = new DataView(buffer);
   const magic = String.fromCharCode(v.getUint8(0), v.getUint8(1), v.getUint8(2), v.getUint8(3));
-  if (magic !== 'SODF' || v.getUint16(4, true) !== 1) throw new Error('not a SODA frame of version 1');
+  if (magic !== 'SODF' || v.getUint16(4, true) !== 2) throw new Error('not a SODA frame of version 2');
   const f = {
     step: v.getFloat64(8, true),
     hash: v.getUint32(20, true).toString(16).padStart(8, '0') + v.getUint32(16, true).toString(16).padStart(8, '0'),
@@ -143,6 +143,8 @@ function decode(buffer) {
   }
   f.owners = new Uint16Array(buffer, at, f.cells);
   at += Math.ceil(f.cells * 2 / 4) * 4;
+  f.recomputes = new Uint32Array(buffer, at, f.cells);
+  at += f.cells * 4;
   f.bodyOffset = at;
   f.view = v;
   return f;
@@ -159,8 +161,6 @@ function draw(f) {
   balls = ensureCapacity(balls, ballGeometry, nl);
   boxIds = new Array(nb); ballIds = new Array(nl);
   const ids = new Array(f.bodies);
-  const occupied = new Map();   // cell -> world, for rollback flashes
-  const dims = soda.scene.grid.dims, gmin = soda.scene.grid.min, edge = soda.scene.grid.edge;
   let ib = 0, il = 0;
   for (let i = 0, at = f.bodyOffset; i < f.bodies; i++, at += BODY) {
     const id = v.getUint32(at + 4, true) * 4294967296 + v.getUint32(at, true);
@@ -173,8 +173,6 @@ function draw(f) {
     const colour = id === soda.selected ? white : palette(world, f.worlds, asleep);
     if (kind === 1) { boxes.setMatrixAt(ib, m4); boxes.setColorAt(ib, colour); boxIds[ib++] = id; }
     else { balls.setMatrixAt(il, m4); balls.setColorAt(il, colour); ballIds[il++] = id; }
-    const cx = Math.floor((pos.x - gmin[0]) / edge), cy = Math.floor((pos.y - gmin[1]) / edge), cz = Math.floor((pos.z - gmin[2]) / edge);
-    if (cx >= 0 && cy >= 0 && cz >= 0 && cx < dims[0] && cy < dims[1] && cz < dims[2]) occupied.set(cx + dims[0] * (cy + dims[1] * cz), world);
   }
   soda.ids = ids;
   for (const m of [boxes, balls]) {
@@ -182,13 +180,15 @@ function draw(f) {
     m.instanceMatrix.needsUpdate = true;
     if (m.instanceColor) m.instanceColor.needsUpdate = true;
   }
-  // Rollbacks since the previous frame drawn flash the occupied cells of the worlds concerned.
-  if (lastRollbacks && lastRollbacks.length === f.worlds) {
-    const rolled = new Set();
-    for (let w = 0; w < f.worlds; w++) if (f.rollbacks[w] > lastRollbacks[w]) rolled.add(w);
-    if (rolled.size) for (const [cell, w] of occupied) if (rolled.has(w)) flash.set(cell, 1);
+  // A cell flashes when a rollback reached it since the frame drawn before: its count of
+  // re-executed computations grew (a cell that changed owner restarts its count: no flash).
+  if (lastRecomputes && lastRecomputes.length === f.cells) {
+    for (let c = 0; c < f.cells; c++) {
+      if (f.recomputes[c] > lastRecomputes[c] && f.owners[c] === lastOwners[c]) flash.set(c, 1);
+    }
   }
-  lastRollbacks = f.rollbacks.slice();
+  lastRecomputes = f.recomputes.slice();
+  lastOwners = f.owners.slice();
   drawFlashes();
   drawPanel(f);
   drawTimeline(f);

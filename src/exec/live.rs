@@ -26,6 +26,9 @@ pub struct WorldStatus {
     pub rollbacks: u64,
     /// Cell computations re-executed so far.
     pub cells_recomputed: u64,
+    /// Per cell of `cells` (same order), its computations re-executed so far: where the
+    /// rollbacks reached (a cell that changes owner starts again from 0 in its new world).
+    pub cell_recomputes: Vec<u64>,
 }
 
 impl WorldStatus {
@@ -37,6 +40,7 @@ impl WorldStatus {
             cells: world.cells().to_vec(),
             rollbacks: c.rollbacks_primary + c.rollbacks_secondary,
             cells_recomputed: c.cells_recomputed,
+            cell_recomputes: world.cell_recomputes().to_vec(),
         }
     }
 }
@@ -54,5 +58,19 @@ impl LiveStatus {
             }
         }
         owner
+    }
+
+    /// The computations re-executed so far of every cell of a grid of `cells` cells, as its
+    /// owner world counts them (0 where no world owns the cell).
+    pub fn recomputes(&self, cells: usize) -> Vec<u64> {
+        let mut counts = vec![0; cells];
+        for status in &self.worlds {
+            for (&c, &n) in status.cells.iter().zip(&status.cell_recomputes) {
+                if let Some(slot) = counts.get_mut(c as usize) {
+                    *slot = n;
+                }
+            }
+        }
+        counts
     }
 }

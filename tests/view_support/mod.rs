@@ -133,7 +133,7 @@ pub fn header(b: &[u8]) -> Header {
     let worlds = u32_at(52);
     let cells = u32_at(56) as usize;
     let bodies = u32_at(48);
-    let first = 64 + worlds as usize * 24 + (cells * 2).div_ceil(4) * 4;
+    let first = 64 + worlds as usize * 24 + (cells * 2).div_ceil(4) * 4 + cells * 4;
     Header {
         step: f64_at(8) as u64,
         hash: u64::from(u32_at(16)) | (u64::from(u32_at(20)) << 32),

@@ -14,6 +14,7 @@
 //! | 48 | bodies (u32), worlds (u32), cells (u32), paused (u32) |
 //! | 64 | per world: LVT, rollbacks so far, cells recomputed so far (3 × f64) |
 //! | … | owner world of every cell (u16, `0xFFFF`: none), padded to 4 bytes |
+//! | … | computations of every cell re-executed so far by its owner (u32, saturating; a cell that changes owner starts again from 0): the page flashes a cell whose count grew |
 //! | … | per body (52 bytes): id low, id high (2 × u32), world (u16), shape (u8: 0 ball, 1 box), asleep (u8), position (3 × f32), rotation x, y, z, w (4 × f32), size (3 × f32: radius 3 times, or half extents) |
 //!
 //! The display stage fills in the fields of offsets 32–63 when it shows the frame.
@@ -25,7 +26,7 @@ use soda::physics::{Body, Shape};
 /// First four bytes of every frame.
 pub const MAGIC: &[u8; 4] = b"SODF";
 /// The format's version.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Bytes before the per-world records.
 pub const HEADER_BYTES: usize = 64;
 /// Bytes per world record.
@@ -78,6 +79,7 @@ pub fn fill_display_fields(bytes: &mut [u8], fields: DisplayFields) {
 pub struct Look {
     live: Option<LiveStatus>,
     owners: Vec<u16>,
+    recomputes: Vec<u32>,
 }
 
 impl Look {
@@ -92,7 +94,19 @@ impl Look {
                 .collect(),
             None => vec![0; cells],
         };
-        Look { live, owners }
+        let recomputes = match &live {
+            Some(l) => l
+                .recomputes(cells)
+                .iter()
+                .map(|&n| n.min(u64::from(u32::MAX)) as u32)
+                .collect(),
+            None => vec![0; cells],
+        };
+        Look {
+            live,
+            owners,
+            recomputes,
+        }
     }
 }
 
@@ -104,7 +118,7 @@ pub fn encode(step: u64, hash: u64, bodies: &[&Body], grid: &Grid, look: &Look) 
     let worlds = live.map_or(1, |l| l.worlds.len());
     let owner_bytes = (cells * 2).div_ceil(4) * 4;
     let mut b = Vec::with_capacity(
-        HEADER_BYTES + worlds * WORLD_BYTES + owner_bytes + bodies.len() * BODY_BYTES,
+        HEADER_BYTES + worlds * WORLD_BYTES + owner_bytes + cells * 4 + bodies.len() * BODY_BYTES,
     );
     b.extend_from_slice(MAGIC);
     b.extend_from_slice(&VERSION.to_le_bytes());
@@ -135,6 +149,9 @@ pub fn encode(step: u64, hash: u64, bodies: &[&Body], grid: &Grid, look: &Look) 
         b.extend_from_slice(&o.to_le_bytes());
     }
     b.resize(b.len() + owner_bytes - cells * 2, 0);
+    for &n in &look.recomputes {
+        b.extend_from_slice(&n.to_le_bytes());
+    }
     for body in bodies {
         let world = grid
             .cell_of(body.position.into())
@@ -197,12 +214,14 @@ mod tests {
                     cells: vec![0],
                     rollbacks: 3,
                     cells_recomputed: 40,
+                    cell_recomputes: vec![40],
                 },
                 WorldStatus {
                     lvt: 10,
                     cells: vec![1],
                     rollbacks: 0,
                     cells_recomputed: 0,
+                    cell_recomputes: vec![0],
                 },
             ],
         };
@@ -247,7 +266,16 @@ mod tests {
             u16::from_le_bytes(b[owners_at..owners_at + 2].try_into().unwrap()),
             0
         );
-        let body_at = owners_at + (cells * 2).div_ceil(4) * 4;
+        let recomputes_at = owners_at + (cells * 2).div_ceil(4) * 4;
+        assert_eq!(
+            u32::from_le_bytes(b[recomputes_at..recomputes_at + 4].try_into().unwrap()),
+            40
+        );
+        assert_eq!(
+            u32::from_le_bytes(b[recomputes_at + 4..recomputes_at + 8].try_into().unwrap()),
+            0
+        );
+        let body_at = recomputes_at + cells * 4;
         assert_eq!(b.len(), body_at + BODY_BYTES);
         assert_eq!(
             u32::from_le_bytes(b[body_at..body_at + 4].try_into().unwrap()),

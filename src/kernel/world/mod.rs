@@ -94,6 +94,9 @@ pub struct World<M: CellModel> {
     end: Step,
     /// Conservative mode: per own cell, the next step it computes.
     next: PerOwnCell<Step>,
+    /// Per own cell, its computations re-executed so far: what a live display flashes
+    /// (observation only; a reterritory keeps the counts of the cells the world keeps).
+    recomputes: PerOwnCell<u64>,
     /// Conservative mode: the smallest of `next`.
     next_min: Step,
     /// Conservative mode: the GVT at its last action that could compute nothing.
@@ -165,6 +168,11 @@ impl<M: CellModel> World<M> {
         );
         fresh.counters = std::mem::take(&mut self.counters);
         fresh.record = self.record.take();
+        for (x, &c) in fresh.cells.enumerate() {
+            if let Ok(old) = self.cells.as_slice().binary_search(&c) {
+                fresh.recomputes[x] = self.recomputes.as_slice()[old];
+            }
+        }
         *self = fresh;
     }
 
@@ -198,6 +206,13 @@ impl<M: CellModel> World<M> {
     /// The cells it owns (linear indices, ascending).
     pub fn cells(&self) -> &[u32] {
         self.cells.as_slice()
+    }
+
+    /// Per own cell (in the order of [`World::cells`]), its computations re-executed so far:
+    /// where the rollbacks reached. Only for observing a run (live displays); a reterritory
+    /// keeps the counts of the cells the world keeps, new cells start at 0.
+    pub fn cell_recomputes(&self) -> &[u64] {
+        self.recomputes.as_slice()
     }
 
     /// The other worlds owning a cell next to one of its own (ascending): those it exchanges

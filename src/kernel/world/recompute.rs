@@ -314,6 +314,7 @@ impl<M: CellModel> World<M> {
                 Out::empty(self.cells[x])
             } else {
                 self.counters.cells_recomputed += 1;
+                self.recomputes[x] += 1;
                 if let Some(r) = &mut self.record {
                     r.recomputed(s, self.cells[x]);
                 }

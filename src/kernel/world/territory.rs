@@ -103,6 +103,7 @@ impl<M: CellModel> World<M> {
             head: step,
             end: step,
             next: vec![step; n].into(),
+            recomputes: vec![0; n].into(),
             next_min: if n == 0 { Step::MAX } else { step },
             idle_at: None,
             slots: VecDeque::from([slot]),
