@@ -43,9 +43,40 @@ impl<S: Clone> CellStates<S> {
         events: &mut Vec<Event<M::Event>>,
     ) -> Self {
         // Collecting a vector reuses its allocation.
-        let mut entities: Vec<S> = states.into_iter().collect();
-        let too_many = "more than u32::MAX entities";
-        u32::try_from(entities.len()).expect(too_many);
+        Self::bin::<M>(grid, states.into_iter().collect(), Vec::new(), step, events)
+    }
+
+    /// Replaces this state by `states` binned as [`CellStates::binned`] does (the same
+    /// cells in the same order, the same events), reusing this state's allocations, and
+    /// returns its previous entity vector emptied (its capacity kept) for the caller to fill
+    /// with the next states: stepping a million entities then allocates no new memory.
+    ///
+    /// # Panics
+    /// With more than `u32::MAX` entities.
+    pub fn rebin<M: CellModel<State = S>>(
+        &mut self,
+        grid: &Grid,
+        states: Vec<S>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+    ) -> Vec<S> {
+        let starts = std::mem::take(&mut self.starts);
+        let old = std::mem::replace(self, Self::bin::<M>(grid, states, starts, step, events));
+        let mut entities = old.entities;
+        entities.clear();
+        entities
+    }
+
+    /// Bins `entities` into a state whose cell starts reuse the allocation of `starts`.
+    fn bin<M: CellModel<State = S>>(
+        grid: &Grid,
+        mut entities: Vec<S>,
+        mut starts: Vec<u32>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+    ) -> Self {
+        u32::try_from(entities.len()).expect("more than u32::MAX entities");
+        // Each entity's cell, then (below) its index in the result.
         let mut target: Vec<u32> = Vec::with_capacity(entities.len());
         entities.retain(|s| match grid.cell_of(M::position(s)) {
             Some(c) => {
@@ -61,24 +92,26 @@ impl<S: Clone> CellStates<S> {
                 false
             }
         });
-        let mut starts = vec![0u32; grid.cell_count() + 1];
+        // Counts at `c + 2`, summed: `starts[c + 1]` is where cell `c` begins. Handing out
+        // indices from it leaves there where cell `c` ends (where `c + 1` begins): the
+        // starts, with one entry too many at the end.
+        starts.clear();
+        starts.resize(grid.cell_count() + 2, 0);
         for &c in &target {
-            starts[c as usize + 1] += 1;
+            starts[c as usize + 2] += 1;
         }
         let mut sum = 0u32;
         for s in &mut starts {
             sum += *s;
             *s = sum;
         }
-        // Each entity's index in the result: its cell's start plus the entities of that cell
-        // before it, so a cell keeps the given order.
-        let mut next = starts.clone();
+        // In the order given, so a cell keeps that order.
         for t in &mut target {
-            let slot = &mut next[*t as usize];
+            let slot = &mut starts[*t as usize + 1];
             *t = *slot;
             *slot += 1;
         }
-        drop(next);
+        starts.pop();
         // Moves every entity to its index, one cycle of the permutation at a time.
         for i in 0..entities.len() {
             while target[i] as usize != i {
@@ -122,8 +155,30 @@ impl<S: Clone> CellStates<S> {
 
     /// The 27-cell neighbourhood of `c`.
     pub fn neighbourhood(&self, grid: &Grid, c: CellCoord) -> Neighbourhood<'_, S> {
-        let cells =
-            std::array::from_fn(|k| self.cell(grid, c.offset(Neighbourhood::<S>::offset(k))));
+        let mut cells: [&[S]; 27] = [&[]; 27];
+        let [nx, ny, nz] = grid.dims;
+        // Row by row along x (slot = 9·(dz + 1) + 3·(dy + 1) + dx + 1): a row's cells are
+        // consecutive in the grid's linear order, and so are their entities.
+        for dz in -1..=1 {
+            let z = c.z + dz;
+            if z < 0 || z >= nz {
+                continue;
+            }
+            for dy in -1..=1 {
+                let y = c.y + dy;
+                if y < 0 || y >= ny {
+                    continue;
+                }
+                let row = ((dz + 1) * 9 + (dy + 1) * 3) as usize;
+                let first = grid.index(CellCoord::new(0, y, z));
+                for dx in -1..=1 {
+                    let x = c.x + dx;
+                    if x >= 0 && x < nx {
+                        cells[row + (dx + 1) as usize] = self.cell_at(first + x as usize);
+                    }
+                }
+            }
+        }
         Neighbourhood { centre: c, cells }
     }
 
@@ -270,6 +325,50 @@ mod tests {
             let left: Vec<u64> = events.iter().map(|e| e.body).collect();
             assert_eq!(left, outside, "bodies outside the grid, in the given order");
             assert!(events.iter().all(|e| e.step == 4));
+            // Rebinning over a state of other bodies gives the same state and events.
+            let mut rebinned = CellStates::binned::<RigidBodyModel>(
+                &grid,
+                bodies.iter().rev().cloned(),
+                3,
+                &mut Vec::new(),
+            );
+            let mut again: Vec<Event<EventKind>> = Vec::new();
+            let spare = rebinned.rebin::<RigidBodyModel>(&grid, bodies.clone(), 4, &mut again);
+            assert!(spare.is_empty());
+            assert_eq!(rebinned, state);
+            assert_eq!(again, events);
+        }
+    }
+
+    #[test]
+    fn a_neighbourhood_holds_the_27_cells_around_its_centre_in_slot_order() {
+        let grid = Grid::covering(Vec3::zeros(), Vec3::new(4.0, 3.0, 5.0), 1.0);
+        let bodies: Vec<Body> = (0..grid.cell_count() as u64)
+            .map(|i| {
+                let c = grid.coord(i as usize);
+                let p = Vec3::new(c.x as f32 + 0.5, c.y as f32 + 0.5, c.z as f32 + 0.5);
+                Body::new(
+                    i,
+                    Shape::Ball { radius: 0.1 },
+                    Material::default(),
+                    p,
+                    Quat::identity(),
+                )
+            })
+            .collect();
+        let state = CellStates::binned::<RigidBodyModel>(&grid, bodies, 0, &mut Vec::new());
+        for x in -1..=4 {
+            for y in -1..=3 {
+                for z in -1..=5 {
+                    let centre = crate::grid::CellCoord::new(x, y, z);
+                    let nb = state.neighbourhood(&grid, centre);
+                    assert_eq!(nb.centre, centre);
+                    for (k, cell) in nb.cells.iter().enumerate() {
+                        let at = centre.offset(crate::model::Neighbourhood::<Body>::offset(k));
+                        assert_eq!(*cell, state.cell(&grid, at), "slot {k} of {centre:?}");
+                    }
+                }
+            }
         }
     }
 
