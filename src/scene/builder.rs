@@ -111,6 +111,12 @@ impl SceneBuilder {
         self
     }
 
+    /// Makes room for `additional` more bodies (what a builder of a known size calls first,
+    /// so that a million bodies are not copied each time the list doubles).
+    pub fn reserve(&mut self, additional: usize) {
+        self.scene.bodies.reserve_exact(additional);
+    }
+
     /// Adds a body at rest with id = number of bodies added so far; returns its id.
     pub fn body(
         &mut self,
