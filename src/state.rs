@@ -7,53 +7,132 @@ use crate::hash::StateHash;
 use crate::model::{CellModel, Neighbourhood, Step};
 
 /// Per-cell entity lists over a grid, each sorted by id.
+///
+/// Stored flat: every entity in one vector, cell after cell in linear cell order, and each
+/// cell's range in it. A million entities are one allocation instead of one per occupied
+/// cell, and neighbouring cells along x are neighbours in memory.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CellStates<S> {
-    cells: Vec<Vec<S>>,
-    count: usize,
+    /// The entities, grouped by cell in linear cell order, each group sorted by id.
+    entities: Vec<S>,
+    /// Cell `i` holds `entities[starts[i]..starts[i + 1]]`; one more than the cell count.
+    starts: Vec<u32>,
 }
 
 impl<S: Clone> CellStates<S> {
     /// An empty state for `grid`.
     pub fn empty(grid: &Grid) -> Self {
         CellStates {
-            cells: vec![Vec::new(); grid.cell_count()],
-            count: 0,
+            entities: Vec::new(),
+            starts: vec![0; grid.cell_count() + 1],
         }
     }
 
     /// Bins `states` by home cell. Entities outside the grid are returned as [`LeftGrid`]
     /// events at `step` and dropped.
+    ///
+    /// Each cell holds its entities in the order given, then stably sorted by id. Linear in
+    /// the number of entities and cells (a counting sort by cell, moved in place).
+    ///
+    /// # Panics
+    /// With more than `u32::MAX` entities.
     pub fn binned<M: CellModel<State = S>>(
         grid: &Grid,
         states: impl IntoIterator<Item = S>,
         step: Step,
         events: &mut Vec<Event<M::Event>>,
     ) -> Self {
-        let mut me = Self::empty(grid);
-        for s in states {
-            match grid.cell_of(M::position(&s)) {
-                Some(c) => {
-                    me.cells[grid.index(c)].push(s);
-                    me.count += 1;
-                }
-                None => events.push(Event {
+        // Collecting a vector reuses its allocation.
+        Self::bin::<M>(grid, states.into_iter().collect(), Vec::new(), step, events)
+    }
+
+    /// Replaces this state by `states` binned as [`CellStates::binned`] does (the same
+    /// cells in the same order, the same events), reusing this state's allocations, and
+    /// returns its previous entity vector emptied (its capacity kept) for the caller to fill
+    /// with the next states: stepping a million entities then allocates no new memory.
+    ///
+    /// # Panics
+    /// With more than `u32::MAX` entities.
+    pub fn rebin<M: CellModel<State = S>>(
+        &mut self,
+        grid: &Grid,
+        states: Vec<S>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+    ) -> Vec<S> {
+        let starts = std::mem::take(&mut self.starts);
+        let old = std::mem::replace(self, Self::bin::<M>(grid, states, starts, step, events));
+        let mut entities = old.entities;
+        entities.clear();
+        entities
+    }
+
+    /// Bins `entities` into a state whose cell starts reuse the allocation of `starts`.
+    fn bin<M: CellModel<State = S>>(
+        grid: &Grid,
+        mut entities: Vec<S>,
+        mut starts: Vec<u32>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+    ) -> Self {
+        u32::try_from(entities.len()).expect("more than u32::MAX entities");
+        // Each entity's cell, then (below) its index in the result.
+        let mut target: Vec<u32> = Vec::with_capacity(entities.len());
+        entities.retain(|s| match grid.cell_of(M::position(s)) {
+            Some(c) => {
+                target.push(grid.index(c) as u32);
+                true
+            }
+            None => {
+                events.push(Event {
                     step,
-                    body: M::id(&s),
+                    body: M::id(s),
                     kind: LeftGrid.into(),
-                }),
+                });
+                false
+            }
+        });
+        // Counts at `c + 2`, summed: `starts[c + 1]` is where cell `c` begins. Handing out
+        // indices from it leaves there where cell `c` ends (where `c + 1` begins): the
+        // starts, with one entry too many at the end.
+        starts.clear();
+        starts.resize(grid.cell_count() + 2, 0);
+        for &c in &target {
+            starts[c as usize + 2] += 1;
+        }
+        let mut sum = 0u32;
+        for s in &mut starts {
+            sum += *s;
+            *s = sum;
+        }
+        // In the order given, so a cell keeps that order.
+        for t in &mut target {
+            let slot = &mut starts[*t as usize + 1];
+            *t = *slot;
+            *slot += 1;
+        }
+        starts.pop();
+        // Moves every entity to its index, one cycle of the permutation at a time.
+        for i in 0..entities.len() {
+            while target[i] as usize != i {
+                let j = target[i] as usize;
+                entities.swap(i, j);
+                target.swap(i, j);
             }
         }
-        for c in &mut me.cells {
-            c.sort_by_key(|s| M::id(s));
+        drop(target);
+        for w in starts.windows(2) {
+            if w[1] - w[0] > 1 {
+                entities[w[0] as usize..w[1] as usize].sort_by_key(|s| M::id(s));
+            }
         }
-        me
+        CellStates { entities, starts }
     }
 
     /// The entities homed in cell `c` (sorted by id); empty outside the grid.
     pub fn cell(&self, grid: &Grid, c: CellCoord) -> &[S] {
         if grid.contains(c) {
-            &self.cells[grid.index(c)]
+            self.cell_at(grid.index(c))
         } else {
             &[]
         }
@@ -61,38 +140,60 @@ impl<S: Clone> CellStates<S> {
 
     /// The entities of cell with linear index `i`.
     pub fn cell_at(&self, i: usize) -> &[S] {
-        &self.cells[i]
+        &self.entities[self.starts[i] as usize..self.starts[i + 1] as usize]
     }
 
     /// Number of entities.
     pub fn len(&self) -> usize {
-        self.count
+        self.entities.len()
     }
 
     /// Whether there are no entities.
     pub fn is_empty(&self) -> bool {
-        self.count == 0
+        self.entities.is_empty()
     }
 
     /// The 27-cell neighbourhood of `c`.
     pub fn neighbourhood(&self, grid: &Grid, c: CellCoord) -> Neighbourhood<'_, S> {
-        let cells =
-            std::array::from_fn(|k| self.cell(grid, c.offset(Neighbourhood::<S>::offset(k))));
+        let mut cells: [&[S]; 27] = [&[]; 27];
+        let [nx, ny, nz] = grid.dims;
+        // Row by row along x (slot = 9·(dz + 1) + 3·(dy + 1) + dx + 1): a row's cells are
+        // consecutive in the grid's linear order, and so are their entities.
+        for dz in -1..=1 {
+            let z = c.z + dz;
+            if z < 0 || z >= nz {
+                continue;
+            }
+            for dy in -1..=1 {
+                let y = c.y + dy;
+                if y < 0 || y >= ny {
+                    continue;
+                }
+                let row = ((dz + 1) * 9 + (dy + 1) * 3) as usize;
+                let first = grid.index(CellCoord::new(0, y, z));
+                for dx in -1..=1 {
+                    let x = c.x + dx;
+                    if x >= 0 && x < nx {
+                        cells[row + (dx + 1) as usize] = self.cell_at(first + x as usize);
+                    }
+                }
+            }
+        }
         Neighbourhood { centre: c, cells }
     }
 
     /// Linear indices of the non-empty cells, ascending.
     pub fn occupied(&self) -> impl Iterator<Item = usize> + '_ {
-        self.cells
-            .iter()
+        self.starts
+            .windows(2)
             .enumerate()
-            .filter(|(_, c)| !c.is_empty())
+            .filter(|(_, w)| w[0] != w[1])
             .map(|(i, _)| i)
     }
 
     /// All entities, sorted by id.
     pub fn sorted<M: CellModel<State = S>>(&self) -> Vec<&S> {
-        sorted_by_id::<M>(self.cells.iter().flatten())
+        sorted_by_id::<M>(&self.entities)
     }
 
     /// The canonical state hash (SPEC.md §Hash).
@@ -163,9 +264,113 @@ pub fn canonical_hash<'a, M: CellModel>(sorted: impl IntoIterator<Item = &'a M::
 
 #[cfg(test)]
 mod tests {
-    use super::sort_by_id;
+    use super::{sort_by_id, CellStates};
+    use crate::frame::Event;
+    use crate::grid::Grid;
+    use crate::math::{Quat, Vec3};
+    use crate::physics::{Body, EventKind, Material, RigidBodyModel, Shape};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    /// Binning as it was done with one vector per cell: push in the given order, then a
+    /// stable sort by id per cell.
+    fn binned_cell_by_cell(grid: &Grid, bodies: &[Body]) -> (Vec<Vec<Body>>, Vec<u64>) {
+        let mut cells = vec![Vec::new(); grid.cell_count()];
+        let mut outside = Vec::new();
+        for b in bodies {
+            match grid.cell_of(b.position.into()) {
+                Some(c) => cells[grid.index(c)].push(b.clone()),
+                None => outside.push(b.id),
+            }
+        }
+        for c in &mut cells {
+            c.sort_by_key(|b| b.id);
+        }
+        (cells, outside)
+    }
+
+    #[test]
+    fn flat_binning_gives_every_cell_the_bodies_of_per_cell_binning_in_the_same_order() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let grid = Grid::covering(Vec3::zeros(), Vec3::new(5.0, 3.0, 4.0), 1.0);
+        for (n, ids) in [(0, 1), (1, 1), (40, 10), (500, 60), (3000, 1_000_000)] {
+            // Some ids repeat (a contract violation binning must still order stably) and
+            // some bodies lie outside the grid.
+            let bodies: Vec<Body> = (0..n)
+                .map(|_| {
+                    let p = Vec3::new(
+                        rng.random_range(-1.0f32..6.0),
+                        rng.random_range(-1.0f32..4.0),
+                        rng.random_range(-1.0f32..5.0),
+                    );
+                    let id = rng.random_range(0..ids);
+                    Body::new(
+                        id,
+                        Shape::Ball { radius: 0.1 },
+                        Material::default(),
+                        p,
+                        Quat::identity(),
+                    )
+                })
+                .collect();
+            let (cells, outside) = binned_cell_by_cell(&grid, &bodies);
+            let mut events: Vec<Event<EventKind>> = Vec::new();
+            let state = CellStates::binned::<RigidBodyModel>(&grid, bodies.clone(), 4, &mut events);
+            for (i, cell) in cells.iter().enumerate() {
+                assert_eq!(state.cell_at(i), &cell[..], "cell {i} of {n} bodies");
+            }
+            let occupied: Vec<usize> = (0..cells.len()).filter(|&i| !cells[i].is_empty()).collect();
+            assert_eq!(state.occupied().collect::<Vec<_>>(), occupied);
+            assert_eq!(state.len(), n - outside.len());
+            let left: Vec<u64> = events.iter().map(|e| e.body).collect();
+            assert_eq!(left, outside, "bodies outside the grid, in the given order");
+            assert!(events.iter().all(|e| e.step == 4));
+            // Rebinning over a state of other bodies gives the same state and events.
+            let mut rebinned = CellStates::binned::<RigidBodyModel>(
+                &grid,
+                bodies.iter().rev().cloned(),
+                3,
+                &mut Vec::new(),
+            );
+            let mut again: Vec<Event<EventKind>> = Vec::new();
+            let spare = rebinned.rebin::<RigidBodyModel>(&grid, bodies.clone(), 4, &mut again);
+            assert!(spare.is_empty());
+            assert_eq!(rebinned, state);
+            assert_eq!(again, events);
+        }
+    }
+
+    #[test]
+    fn a_neighbourhood_holds_the_27_cells_around_its_centre_in_slot_order() {
+        let grid = Grid::covering(Vec3::zeros(), Vec3::new(4.0, 3.0, 5.0), 1.0);
+        let bodies: Vec<Body> = (0..grid.cell_count() as u64)
+            .map(|i| {
+                let c = grid.coord(i as usize);
+                let p = Vec3::new(c.x as f32 + 0.5, c.y as f32 + 0.5, c.z as f32 + 0.5);
+                Body::new(
+                    i,
+                    Shape::Ball { radius: 0.1 },
+                    Material::default(),
+                    p,
+                    Quat::identity(),
+                )
+            })
+            .collect();
+        let state = CellStates::binned::<RigidBodyModel>(&grid, bodies, 0, &mut Vec::new());
+        for x in -1..=4 {
+            for y in -1..=3 {
+                for z in -1..=5 {
+                    let centre = crate::grid::CellCoord::new(x, y, z);
+                    let nb = state.neighbourhood(&grid, centre);
+                    assert_eq!(nb.centre, centre);
+                    for (k, cell) in nb.cells.iter().enumerate() {
+                        let at = centre.offset(crate::model::Neighbourhood::<Body>::offset(k));
+                        assert_eq!(*cell, state.cell(&grid, at), "slot {k} of {centre:?}");
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn radix_sort_by_id_gives_the_comparison_sort_order_for_any_ids() {

@@ -24,6 +24,9 @@ pub struct ReferenceRun<M: CellModel> {
     inputs: BTreeMap<Step, Vec<Input<M::State>>>,
     /// Whether every step is checked against the model contract ([`contract`]).
     check: bool,
+    /// The previous state's entity vector, emptied: the next step's states go into it (no
+    /// new allocation of a state's size each step).
+    spare: Vec<M::State>,
 }
 
 /// The measured cost of one cell computation (for the scalability model, `crate::scaling`).
@@ -52,6 +55,7 @@ impl<M: CellModel> ReferenceRun<M> {
                 costs: None,
                 inputs: BTreeMap::new(),
                 check: false,
+                spare: Vec::new(),
             },
             events,
         )
@@ -134,7 +138,8 @@ impl<M: CellModel> ReferenceRun<M> {
     /// [`ExecError::CellPanicked`] naming the cell and step, a contract violation (when
     /// checked) an [`ExecError::Contract`]. After an error the run stays at its last step.
     pub fn try_advance(&mut self) -> Result<Frame<M::Event>, ExecError> {
-        let mut next = Vec::with_capacity(self.state.len());
+        let mut next = std::mem::take(&mut self.spare);
+        next.reserve(self.state.len());
         let mut events = Vec::new();
         let mut firsts: Vec<CellResult<M>> = Vec::new();
         for i in self.state.occupied() {
@@ -185,7 +190,9 @@ impl<M: CellModel> ReferenceRun<M> {
         if let Some(inputs) = self.inputs.remove(&step) {
             next = apply_inputs::<M>(&self.grid, step, next, &inputs)?;
         }
-        self.state = CellStates::binned::<M>(&self.grid, next, self.step, &mut events);
+        self.spare = self
+            .state
+            .rebin::<M>(&self.grid, next, self.step, &mut events);
         if self.check {
             contract::check_unique_ids::<M>(&self.grid, &self.state, step)?;
         }

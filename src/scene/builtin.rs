@@ -79,6 +79,7 @@ fn falling_cubes(n: usize, rng: &mut ChaCha8Rng, pad: f32, corner: [f32; 2]) -> 
         )
     };
     let mut b = SceneBuilder::new(min, max);
+    b.reserve(n);
     let mat = Material {
         density: 1.0,
         friction: 0.5,
@@ -110,6 +111,7 @@ fn sparse_gas(n: usize, rng: &mut ChaCha8Rng) -> SceneBuilder {
         .gravity([0.0; 3])
         .walls(true, true)
         .environment_material(0.0, 1.0);
+    b.reserve(n);
     let mat = Material {
         density: 1.0,
         friction: 0.0,
@@ -137,6 +139,7 @@ fn dense_pile(n: usize, rng: &mut ChaCha8Rng) -> SceneBuilder {
     let mut b = SceneBuilder::new([0.0, -1.0, 0.0], [width, top, width])
         .walls(true, false)
         .environment_material(0.5, 0.0);
+    b.reserve(n);
     let mat = Material {
         density: 1.0,
         friction: 0.5,
@@ -167,6 +170,7 @@ fn chain(n: usize) -> SceneBuilder {
     let length = n as f32 * 2.0 * radius;
     let mut b = SceneBuilder::new([-1.0, -1.0, -2.0], [length + 1.0, 3.0, 2.0])
         .environment_material(0.1, 0.0);
+    b.reserve(n);
     let mat = Material {
         density: 1.0,
         friction: 0.1,
@@ -223,6 +227,7 @@ fn peak(n: usize, rng: &mut ChaCha8Rng) -> SceneBuilder {
     let top = PEAK_DROP_HEIGHT + (layers as f32 - 1.0) * 1.2 + 0.5;
     let mut b = SceneBuilder::new([-half, -1.0, -half], [half, top + 5.0, half])
         .environment_material(0.5, 0.0);
+    b.reserve(n);
     let material = Material::default();
     for (k, p) in sites(s).into_iter().take(balls).enumerate() {
         b = b.body_spec(BodySpec {

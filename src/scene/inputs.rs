@@ -124,6 +124,7 @@ impl InputScript {
             ids: scene.bodies.iter().map(|b| (b.id, (None, None))).collect(),
         };
         let mut out = Vec::with_capacity(order.len());
+        let largest = scene.max_radius();
         for i in order {
             let e = &self.inputs[i];
             if e.step < first_step.max(1) {
@@ -195,7 +196,13 @@ impl InputScript {
                 InputAction::Spawn => {
                     required("body", e.body.is_some())?;
                     let body = e.body.as_ref().expect("checked");
-                    validate_added_body(scene, body, origin, &format!("inputs[{i}].body"))?;
+                    validate_added_body(
+                        scene,
+                        body,
+                        origin,
+                        &format!("inputs[{i}].body"),
+                        largest,
+                    )?;
                     if let Some((from, None)) = presence.ids.get(&body.id) {
                         return Err(fail(
                             i,

@@ -13,6 +13,32 @@ struct Checker<'a> {
     origin: &'a str,
 }
 
+/// A field's name in a message, made only when a check fails.
+trait FieldName {
+    fn name(self) -> String;
+}
+
+impl FieldName for &str {
+    fn name(self) -> String {
+        self.to_string()
+    }
+}
+
+impl FieldName for &String {
+    fn name(self) -> String {
+        self.clone()
+    }
+}
+
+/// A field name formatted on failure only: a million valid bodies format none.
+struct Lazy<F>(F);
+
+impl<F: FnOnce() -> String> FieldName for Lazy<F> {
+    fn name(self) -> String {
+        (self.0)()
+    }
+}
+
 impl Checker<'_> {
     fn fail(
         &self,
@@ -28,12 +54,12 @@ impl Checker<'_> {
         }
     }
 
-    fn finite(&self, field: &str, v: &[f32]) -> Result<(), SceneError> {
+    fn finite(&self, field: impl FieldName, v: &[f32]) -> Result<(), SceneError> {
         if v.iter().all(|x| x.is_finite()) {
             Ok(())
         } else {
             Err(self.fail(
-                field,
+                field.name(),
                 v,
                 "every component must be a finite number (no NaN or infinity)",
             ))
@@ -42,7 +68,7 @@ impl Checker<'_> {
 
     fn range(
         &self,
-        field: &str,
+        field: impl FieldName,
         v: f32,
         lo: f32,
         hi: f32,
@@ -51,15 +77,15 @@ impl Checker<'_> {
         if v.is_finite() && v >= lo && v <= hi {
             Ok(())
         } else {
-            Err(self.fail(field, v, allowed))
+            Err(self.fail(field.name(), v, allowed))
         }
     }
 
-    fn positive(&self, field: &str, v: f32) -> Result<(), SceneError> {
+    fn positive(&self, field: impl FieldName, v: f32) -> Result<(), SceneError> {
         if v.is_finite() && v > 0.0 {
             Ok(())
         } else {
-            Err(self.fail(field, v, "must be a finite number greater than 0"))
+            Err(self.fail(field.name(), v, "must be a finite number greater than 0"))
         }
     }
 }
@@ -273,10 +299,10 @@ fn check_body(
 ) -> Result<(), SceneError> {
     let s = &scene.solver;
     match b.shape {
-        Shape::Ball { radius } => c.positive(&f("shape.radius"), radius)?,
+        Shape::Ball { radius } => c.positive(Lazy(|| f("shape.radius")), radius)?,
         Shape::Cuboid { half_extents } => {
             for (k, &h) in half_extents.iter().enumerate() {
-                c.positive(&f(&format!("shape.half_extents[{k}]")), h)?;
+                c.positive(Lazy(|| f(&format!("shape.half_extents[{k}]"))), h)?;
             }
         }
     }
@@ -288,7 +314,7 @@ fn check_body(
             &format!("the body (bounding diameter {diameter} m) must be smaller than the domain's smallest extent ({smallest} m)"),
         ));
     }
-    c.positive(&f("material.density"), b.material.density)?;
+    c.positive(Lazy(|| f("material.density")), b.material.density)?;
     // Mass and inertia derived in f32 must be finite and non-zero: a radius of 1e-38 m
     // passes the checks above but its inertia underflows, and the solver would turn the
     // infinite inverse into NaN (a hard error at the first step, SPEC.md §5.3).
@@ -316,23 +342,23 @@ fn check_body(
         ));
     }
     c.range(
-        &f("material.friction"),
+        Lazy(|| f("material.friction")),
         b.material.friction,
         0.0,
         10.0,
         "must be between 0 and 10",
     )?;
     c.range(
-        &f("material.restitution"),
+        Lazy(|| f("material.restitution")),
         b.material.restitution,
         0.0,
         1.0,
         "must be between 0 and 1",
     )?;
-    c.finite(&f("position"), &b.position)?;
-    c.finite(&f("rotation"), &b.rotation)?;
-    c.finite(&f("velocity"), &b.velocity)?;
-    c.finite(&f("angular_velocity"), &b.angular_velocity)?;
+    c.finite(Lazy(|| f("position")), &b.position)?;
+    c.finite(Lazy(|| f("rotation")), &b.rotation)?;
+    c.finite(Lazy(|| f("velocity")), &b.velocity)?;
+    c.finite(Lazy(|| f("angular_velocity")), &b.angular_velocity)?;
     for k in 0..3 {
         if b.position[k] < scene.domain.min[k] || b.position[k] >= scene.domain.max[k] {
             return Err(c.fail(
@@ -361,19 +387,21 @@ fn check_body(
 
 /// Checks a body added to `scene` during a run (an input): the rules of a scene's body, an
 /// id not in `in_use`, and no bigger than the scene's largest body (the grid's cell edge was
-/// sized for that one, SPEC.md §3). `field` names the body in messages (`inputs[3].body`).
+/// sized for that one, SPEC.md §3). `field` names the body in messages (`inputs[3].body`);
+/// `largest` is the scene's [`Scene::max_radius`], passed in so that checking many added
+/// bodies against a large scene does not measure it each time.
 pub fn validate_added_body(
     scene: &Scene,
     b: &BodySpec,
     origin: &str,
     field: &str,
+    largest: f32,
 ) -> Result<(), SceneError> {
     let c = Checker { origin };
     let extent = [0, 1, 2].map(|k| scene.domain.max[k] - scene.domain.min[k]);
     let smallest = extent.iter().cloned().fold(f32::INFINITY, f32::min);
     let f = |name: &str| format!("{field}.{name}");
     check_body(&c, scene, b, &f, smallest)?;
-    let largest = scene.max_radius();
     if b.shape.bounding_radius() > largest {
         return Err(c.fail(
             f("shape"),
