@@ -315,3 +315,60 @@ fn lost_anti_messages_stop_every_rank_with_an_error() {
     assert!(err.contains("lost in transit"), "{err}");
     assert!(err.contains("aborting every rank"), "{err}");
 }
+
+/// Ctrl-C on `mpirun` stops every rank within seconds at a committed step: rank 0 says
+/// where (`interrupted at step N, hash H`), `H` is the reference's hash at step `N`, the
+/// record holds whole frames only, and no rank is left running.
+#[test]
+fn ctrl_c_on_mpirun_stops_every_rank_at_a_committed_step_and_says_where() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let record = dir.path().join("run.csv");
+    let scene = ["--scene", "falling-cubes", "--objects", "300"];
+    let mut child = Command::new("mpirun")
+        .args(["--allow-run-as-root", "--oversubscribe", "-np", "2"])
+        .arg(env!("CARGO_BIN_EXE_soda"))
+        .arg("run")
+        .args(scene)
+        .args(["--steps", "1000000", "--executor", "mpi", "--worlds", "3"])
+        .arg("--record")
+        .arg(&record)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mpirun runs (scripts/install-mpi-deps.sh installs it)");
+    std::thread::sleep(Duration::from_secs(4));
+    // SAFETY: sends SIGINT to the child we spawned and still own (not yet waited for).
+    assert_eq!(
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
+        0
+    );
+    let signalled = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        assert!(
+            signalled.elapsed() < Duration::from_secs(30),
+            "mpirun still running 30 s after Ctrl-C"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().unwrap();
+    let err = stderr(&out);
+    assert!(!out.status.success(), "an interrupted run does not succeed");
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("interrupted at step "))
+        .unwrap_or_else(|| panic!("rank 0 does not say where it stopped:\n{err}"));
+    let rest = &line["interrupted at step ".len()..];
+    let (step, rest) = rest.split_once(", hash ").expect(line);
+    let shown = rest.split(|c: char| !c.is_ascii_hexdigit()).next().unwrap();
+    let mut args = vec!["run"];
+    args.extend(scene);
+    args.extend(["--steps", step]);
+    assert_eq!(hash(&ok(&args)), shown, "{line}");
+    let text = std::fs::read_to_string(&record).unwrap();
+    let last = text.lines().last().unwrap();
+    assert!(
+        last.starts_with(&format!("{step},")),
+        "the record ends at step {step}: {last}"
+    );
+}
