@@ -81,6 +81,32 @@ impl<S: Clone> CellStates<S> {
         Neighbourhood { centre: c, cells }
     }
 
+    /// Empties cell `i`, returning its entities.
+    pub(crate) fn take_cell(&mut self, i: usize) -> Vec<S> {
+        let taken = std::mem::take(&mut self.cells[i]);
+        self.count -= taken.len();
+        taken
+    }
+
+    /// Appends `s` to cell `i` (the cell must be sorted again before it is read).
+    pub(crate) fn push_unsorted(&mut self, i: usize, s: S) {
+        self.cells[i].push(s);
+        self.count += 1;
+    }
+
+    /// Sorts cell `i` by id.
+    pub(crate) fn sort_cell<M: CellModel<State = S>>(&mut self, i: usize) {
+        let cell = &mut self.cells[i];
+        if !cell.is_sorted_by_key(|s| M::id(s)) {
+            cell.sort_by_key(|s| M::id(s));
+        }
+    }
+
+    /// Number of cells (the grid's).
+    pub fn cell_count(&self) -> usize {
+        self.cells.len()
+    }
+
     /// Linear indices of the non-empty cells, ascending.
     pub fn occupied(&self) -> impl Iterator<Item = usize> + '_ {
         self.cells
