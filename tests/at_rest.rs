@@ -9,7 +9,7 @@ use soda::math::{Quat, Vec3};
 use soda::physics::{Body, Material, RigidBodyModel, Shape};
 use soda::scene::builtin::builtin;
 use soda::sim::{RunOptions, Runner};
-use soda::{Frame, EventKind, ReferenceRun, Scene, Step};
+use soda::{EventKind, Frame, ReferenceRun, Scene, Step};
 
 fn pile() -> Scene {
     builtin("falling-cubes", Some(27), 7).expect("falling-cubes builds")
@@ -56,12 +56,23 @@ fn an_all_asleep_step_computes_no_cell_and_commits_the_hash_of_computing_every_c
         let computed = fast.take_costs().len();
         if at_rest {
             asleep_steps += 1;
-            assert_eq!(computed, 0, "step {}: an all-asleep step computed cells", f.step);
+            assert_eq!(
+                computed, 0,
+                "step {}: an all-asleep step computed cells",
+                f.step
+            );
         } else {
-            assert!(computed > 0, "step {}: nothing computed in an awake pile", f.step);
+            assert!(
+                computed > 0,
+                "step {}: nothing computed in an awake pile",
+                f.step
+            );
         }
     }
-    assert!(asleep_steps >= 30, "only {asleep_steps} all-asleep steps were covered");
+    assert!(
+        asleep_steps >= 30,
+        "only {asleep_steps} all-asleep steps were covered"
+    );
     assert_eq!(fast.state(), whole.state());
 }
 
@@ -87,7 +98,10 @@ fn a_cube_dropped_on_an_asleep_pile_commits_the_same_frames_with_and_without_ski
         }
     }
     // While the cube falls, only the cells around it are computed.
-    assert!(partial > 10, "only {partial} steps computed part of the cells");
+    assert!(
+        partial > 10,
+        "only {partial} steps computed part of the cells"
+    );
     assert_eq!(fast.state().len(), 28);
 }
 
@@ -106,7 +120,11 @@ fn frames(options: RunOptions) -> Vec<Frame<EventKind>> {
 fn asleep_and_woken_piles_commit_the_reference_frames_on_every_executor() {
     let reference = frames(RunOptions::reference());
     assert_eq!(reference.len(), STEPS as usize);
-    for mode in [RollbackMode::Cell, RollbackMode::World, RollbackMode::Conservative] {
+    for mode in [
+        RollbackMode::Cell,
+        RollbackMode::World,
+        RollbackMode::Conservative,
+    ] {
         let kernel = KernelConfig::new(4).mode(mode).window(8);
         assert_eq!(
             frames(RunOptions::virtual_exec(kernel.clone())),

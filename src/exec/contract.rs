@@ -107,14 +107,10 @@ pub fn check_at_rest<M: CellModel>(
             (Some(a), Some(b)) if M::same_bits(a, b) => {}
             (Some(a), Some(b)) => {
                 let (fa, fb) = (M::fields(a), M::fields(b));
-                let field = fa
-                    .iter()
-                    .zip(&fb)
-                    .find(|(x, y)| x != y)
-                    .map_or_else(
-                        || "a bit no field shows".to_string(),
-                        |(x, y)| format!("{}: {} became {}", x.0, x.1, y.1),
-                    );
+                let field = fa.iter().zip(&fb).find(|(x, y)| x != y).map_or_else(
+                    || "a bit no field shows".to_string(),
+                    |(x, y)| format!("{}: {} became {}", x.0, x.1, y.1),
+                );
                 return Err(violation(
                     ContractRule::AtRest,
                     step,
