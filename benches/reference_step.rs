@@ -6,7 +6,14 @@
 //! - `settled_one_step`: one iteration = one step from the state after 300 steps (5 simulated
 //!   s), advanced once outside the timing; throughput = 1,000 body-steps.
 //!
-//! Every iteration starts from its own `ReferenceRun` built (outside the timing) from a copy
+//! - `falling-cubes-8000-asleep/all_asleep_one_step`: one iteration = one step of a run of
+//!   8,000 cubes (seed 0) advanced until every body is asleep with zero velocities (checked
+//!   on the state; typically 400-500 steps, ~1 minute outside the timing, only when the
+//!   filter selects this case). Iterations continue the same run step after step, so each
+//!   step follows an all-asleep step as in a real run; throughput = 8,000 body-steps.
+//!   `cargo bench --bench reference_step -- asleep` runs this case alone.
+//!
+//! Every iteration of the first two starts from its own `ReferenceRun` built (outside the timing) from a copy
 //! of the bodies. All of a body's state lives in `Body` (contact history included, if the
 //! model carries any), so this continues the run exactly; only the step counter restarts at
 //! 0, which affects event labels, not physics. Before timing, the bench prints what the
@@ -120,6 +127,57 @@ fn reference_step(c: &mut Criterion) {
         )
     });
     g.finish();
+
+    let asleep_cubes = if steps().0 == 90 { 8000 } else { 27 };
+    let mut g = c.benchmark_group(format!(
+        "reference_step/falling-cubes-{asleep_cubes}-asleep"
+    ));
+    g.sample_size(50)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(3))
+        .throughput(Throughput::Elements(asleep_cubes as u64));
+    // Built once, and only when the filter selects this case (criterion calls the closure
+    // for the warm-up and again for the measurement).
+    let mut asleep: Option<ReferenceRun<RigidBodyModel>> = None;
+    g.bench_function("all_asleep_one_step", |b| {
+        let run = asleep.get_or_insert_with(|| asleep_run(asleep_cubes));
+        b.iter(|| black_box(run.advance()));
+        assert!(all_at_rest(run), "the pile woke up during the timing");
+    });
+    g.finish();
+}
+
+/// Whether every body is asleep and still (velocities exactly zero): what a frozen
+/// neighbourhood keeps (SPEC.md §5.4).
+fn all_at_rest(run: &ReferenceRun<RigidBodyModel>) -> bool {
+    let model = run.model();
+    run.state().sorted::<RigidBodyModel>().iter().all(|b| {
+        model.is_asleep(b)
+            && b.linvel
+                .iter()
+                .chain(b.angvel.iter())
+                .all(|v| v.to_bits() == 0)
+    })
+}
+
+/// A run of `cubes` falling cubes advanced until every body is at rest.
+fn asleep_run(cubes: usize) -> ReferenceRun<RigidBodyModel> {
+    let scene = builtin("falling-cubes", Some(cubes), 0).expect("falling-cubes builds");
+    let mut run = run_from(&scene, scene.initial_bodies());
+    while !all_at_rest(&run) {
+        assert!(
+            run.step_number() < 3000,
+            "{cubes} cubes not asleep after 3,000 steps"
+        );
+        run.advance();
+    }
+    describe("all asleep", &run, run.step_number() as usize);
+    assert_eq!(
+        run.state().len(),
+        cubes,
+        "bodies lost before the pile slept"
+    );
+    run
 }
 
 criterion_group!(benches, reference_step);

@@ -80,6 +80,8 @@ impl<'a, S> Neighbourhood<'a, S> {
 ///    must mean the reader's step cannot read that neighbour.
 /// 6. **Every bit hashed.** [`hash_state`](Self::hash_state) feeds every bit that a step can
 ///    read (else two different states could commit the same hash).
+/// 7. **Honest `at_rest`.** If [`at_rest`](Self::at_rest) is overridden, a neighbourhood
+///    whose entities are all at rest must step to exactly the centre cell's states.
 pub trait CellModel: Send + Sync {
     /// The state of one entity, moved between cells and worlds by the kernel.
     type State: Clone + PartialEq + Debug + Send + Sync + 'static;
@@ -117,6 +119,19 @@ pub trait CellModel: Send + Sync {
     fn may_affect(&self, reader: &Self::State, other: &Self::State) -> bool {
         let _ = (reader, other);
         true
+    }
+
+    /// Whether `state` is at rest: `true` is a promise that whenever every entity of a
+    /// cell's 27-cell neighbourhood is at rest, [`step_cell`](Self::step_cell) appends
+    /// exactly the centre cell's states — the same entities, the same bits
+    /// ([`same_bits`](Self::same_bits)), in the same order — and raises no event, at every
+    /// step. Executors may then skip the computation and keep the cell's state (and, when no
+    /// cell changed, the frame's hash) as it is: a pile asleep costs nearly nothing per step
+    /// (SPEC.md §4.1, rule 7). The contract checker checks the promise on every cell it
+    /// covers. `false`, the default, is always sound.
+    fn at_rest(&self, state: &Self::State) -> bool {
+        let _ = state;
+        false
     }
 
     /// Feeds every bit of the state that matters into the canonical hash.

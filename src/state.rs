@@ -182,6 +182,39 @@ impl<S: Clone> CellStates<S> {
         Neighbourhood { centre: c, cells }
     }
 
+    /// Replaces the cells `computed` (linear indices, ascending) by `outputs`: the result
+    /// is what [`CellStates::rebin`] gives for the entities of every other cell followed by
+    /// `outputs` (each entity binned to the cell its position lies in, every cell sorted by
+    /// id, [`LeftGrid`] events for entities outside the grid). Returns the previous entity
+    /// vector, emptied, as `rebin` does.
+    pub(crate) fn replace_cells<M: CellModel<State = S>>(
+        &mut self,
+        grid: &Grid,
+        computed: &[usize],
+        outputs: Vec<S>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+    ) -> Vec<S> {
+        let mut kept = Vec::with_capacity(self.entities.len() + outputs.len());
+        let mut next_computed = computed.iter().copied().peekable();
+        let mut from = 0usize;
+        for i in 0..self.cell_count() {
+            if next_computed.peek() == Some(&i) {
+                next_computed.next();
+                kept.extend_from_slice(&self.entities[from..self.starts[i] as usize]);
+                from = self.starts[i + 1] as usize;
+            }
+        }
+        kept.extend_from_slice(&self.entities[from..]);
+        kept.extend(outputs);
+        self.rebin::<M>(grid, kept, step, events)
+    }
+
+    /// Number of cells (the grid's).
+    pub fn cell_count(&self) -> usize {
+        self.starts.len() - 1
+    }
+
     /// Linear indices of the non-empty cells, ascending.
     pub fn occupied(&self) -> impl Iterator<Item = usize> + '_ {
         self.starts

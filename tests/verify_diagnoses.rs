@@ -17,6 +17,7 @@ enum Bug {
     TooSmallMayAffect,
     DuplicateId,
     PanicAtStep(Step),
+    FalseAtRest,
 }
 
 static CALLS: AtomicU64 = AtomicU64::new(0);
@@ -51,7 +52,7 @@ impl CellModel for Planted {
         self.inner.step_cell(step, grid, nb, out, events);
         let mine = &mut out[first..];
         match self.bug {
-            Bug::None | Bug::TooSmallMayAffect => {}
+            Bug::None | Bug::TooSmallMayAffect | Bug::FalseAtRest => {}
             Bug::HiddenGlobalState => {
                 let n = CALLS.fetch_add(1, Ordering::Relaxed);
                 if let Some(j) = mine.first_mut() {
@@ -89,6 +90,11 @@ impl CellModel for Planted {
 
     fn may_affect(&self, reader: &Job, other: &Job) -> bool {
         self.bug != Bug::TooSmallMayAffect && self.inner.may_affect(reader, other)
+    }
+
+    fn at_rest(&self, _: &Job) -> bool {
+        // PHOLD mixes every job's value at every step: nothing is ever at rest.
+        self.bug == Bug::FalseAtRest
     }
 
     fn hash_state(j: &Job, h: &mut StateHash) {
@@ -164,6 +170,18 @@ fn a_two_cell_jump_is_named_by_the_contract_checker() {
     assert!(
         text.contains("an entity moved more than one cell"),
         "{text}"
+    );
+}
+
+#[test]
+fn a_false_at_rest_promise_is_named_by_the_contract_checker() {
+    let report = verify(&setup(Bug::FalseAtRest), &options());
+    let v = report.contract.clone().expect("the contract checker fires");
+    assert_eq!((v.rule, v.step), (ContractRule::AtRest, 0));
+    assert!(
+        report.summary().contains("at_rest promised"),
+        "{}",
+        report.summary()
     );
 }
 

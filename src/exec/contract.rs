@@ -83,6 +83,66 @@ pub fn check_cell_outputs<M: CellModel>(
     Ok(())
 }
 
+/// Checks the promise of [`CellModel::at_rest`] for cell `cell`, whose neighbourhood's
+/// entities are all at rest at `step`: its outputs `out` must be its own states `own`, the
+/// same bits in the same order, and it must have raised no event (`events`, its events).
+pub fn check_at_rest<M: CellModel>(
+    cell: CellCoord,
+    step: Step,
+    own: &[M::State],
+    out: &[M::State],
+    events: &[Event<M::Event>],
+) -> Result<(), ContractViolation> {
+    if let Some(e) = events.first() {
+        return Err(violation(
+            ContractRule::AtRest,
+            step,
+            cell,
+            e.body,
+            format!("it raised the event {:?}", e.kind),
+        ));
+    }
+    for k in 0..own.len().max(out.len()) {
+        match (own.get(k), out.get(k)) {
+            (Some(a), Some(b)) if M::same_bits(a, b) => {}
+            (Some(a), Some(b)) => {
+                let (fa, fb) = (M::fields(a), M::fields(b));
+                let field = fa.iter().zip(&fb).find(|(x, y)| x != y).map_or_else(
+                    || "a bit no field shows".to_string(),
+                    |(x, y)| format!("{}: {} became {}", x.0, x.1, y.1),
+                );
+                return Err(violation(
+                    ContractRule::AtRest,
+                    step,
+                    cell,
+                    M::id(a),
+                    format!("entity {} became entity {} ({field})", M::id(a), M::id(b)),
+                ));
+            }
+            (Some(a), None) => {
+                return Err(violation(
+                    ContractRule::AtRest,
+                    step,
+                    cell,
+                    M::id(a),
+                    format!("entity {} was dropped", M::id(a)),
+                ))
+            }
+            (None, Some(b)) => {
+                return Err(violation(
+                    ContractRule::AtRest,
+                    step,
+                    cell,
+                    M::id(b),
+                    format!("entity {} was added", M::id(b)),
+                ))
+            }
+            (None, None) => unreachable!("k is below one of the lengths"),
+        }
+    }
+    Ok(())
+}
+
 /// Checks that no id appears twice in `state` (the whole domain at `step`).
 pub fn check_unique_ids<M: CellModel>(
     grid: &Grid,

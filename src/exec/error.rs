@@ -169,6 +169,9 @@ pub enum ContractRule {
     /// `step_cell` is a pure function of its neighbourhood: computing the same cell again,
     /// in another order, gives the same bits.
     PureStep,
+    /// A neighbourhood whose entities are all at rest ([`crate::CellModel::at_rest`]) steps
+    /// to exactly the centre cell's states, with no event.
+    AtRest,
 }
 
 impl std::fmt::Display for ContractRule {
@@ -183,6 +186,9 @@ impl std::fmt::Display for ContractRule {
             }
             ContractRule::PureStep => {
                 "step_cell is not a pure function of its neighbourhood (hidden state or randomness)"
+            }
+            ContractRule::AtRest => {
+                "a neighbourhood at rest changed (at_rest promised that step_cell keeps the centre cell's states)"
             }
         })
     }

@@ -1,6 +1,8 @@
 //! The reference executor: one thread, no worlds. Each step computes every occupied cell in
 //! topological order from the previous step's state, re-bins entities by home cell, then
-//! applies the inputs of the new step (SPEC.md §8).
+//! applies the inputs of the new step (SPEC.md §8). A cell whose whole neighbourhood is at
+//! rest ([`CellModel::at_rest`]) is not computed: its state is kept as it is, and a step in
+//! which no cell changed keeps the previous frame's hash.
 
 use super::contract::{self, CellResult};
 use super::error::{ExecError, InputError};
@@ -8,7 +10,7 @@ use super::sync::panic_message;
 use crate::frame::{Event, Frame};
 use crate::grid::Grid;
 use crate::kernel::Input;
-use crate::model::{BodyId, CellModel, Step};
+use crate::model::{BodyId, CellModel, Neighbourhood, Step};
 use crate::state::CellStates;
 use std::collections::{BTreeMap, BTreeSet};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -27,6 +29,11 @@ pub struct ReferenceRun<M: CellModel> {
     /// The previous state's entity vector, emptied: the next step's states go into it (no
     /// new allocation of a state's size each step).
     spare: Vec<M::State>,
+    /// Per cell (linear index): whether every entity of its state is at rest
+    /// ([`CellModel::at_rest`]; an empty cell is). Kept for the current state.
+    rest: Vec<bool>,
+    /// The canonical hash of the current state.
+    hash: u64,
 }
 
 /// The measured cost of one cell computation (for the scalability model, `crate::scaling`).
@@ -46,19 +53,63 @@ impl<M: CellModel> ReferenceRun<M> {
     pub fn new(model: M, grid: Grid, initial: Vec<M::State>) -> (Self, Vec<Event<M::Event>>) {
         let mut events = Vec::new();
         let state = CellStates::binned::<M>(&grid, initial, 0, &mut events);
-        (
-            ReferenceRun {
-                model,
-                grid,
-                state,
-                step: 0,
-                costs: None,
-                inputs: BTreeMap::new(),
-                check: false,
-                spare: Vec::new(),
-            },
-            events,
-        )
+        let hash = state.hash::<M>();
+        let mut run = ReferenceRun {
+            model,
+            grid,
+            state,
+            step: 0,
+            costs: None,
+            inputs: BTreeMap::new(),
+            check: false,
+            spare: Vec::new(),
+            rest: Vec::new(),
+            hash,
+        };
+        run.rest = (0..run.state.cell_count())
+            .map(|i| run.cell_at_rest(i))
+            .collect();
+        (run, events)
+    }
+
+    /// Whether every entity of cell `i` of the current state is at rest.
+    fn cell_at_rest(&self, i: usize) -> bool {
+        self.state.cell_at(i).iter().all(|s| self.model.at_rest(s))
+    }
+
+    /// Whether every cell of the 27-neighbourhood of cell `i` is at rest (cells outside the
+    /// grid are empty, hence at rest).
+    fn neighbourhood_at_rest(&self, i: usize) -> bool {
+        let c = self.grid.coord(i);
+        (0..27).all(|k| {
+            let n = c.offset(Neighbourhood::<M::State>::offset(k));
+            !self.grid.contains(n) || self.rest[self.grid.index(n)]
+        })
+    }
+
+    /// The occupied cells to compute this step, ascending: every occupied cell next to (or
+    /// being) a cell that is not at rest. The others step to their own states (the promise
+    /// of [`CellModel::at_rest`]).
+    fn restless_cells(&self) -> Vec<usize> {
+        let mut marked: Vec<bool> = Vec::new();
+        for (i, _) in self.rest.iter().enumerate().filter(|(_, r)| !**r) {
+            if marked.is_empty() {
+                marked = vec![false; self.rest.len()];
+            }
+            let c = self.grid.coord(i);
+            for k in 0..27 {
+                let n = c.offset(Neighbourhood::<M::State>::offset(k));
+                if self.grid.contains(n) {
+                    marked[self.grid.index(n)] = true;
+                }
+            }
+        }
+        marked
+            .iter()
+            .enumerate()
+            .filter(|&(i, &m)| m && !self.state.cell_at(i).is_empty())
+            .map(|(i, _)| i)
+            .collect()
     }
 
     /// Starts (or stops) timing every cell computation. Timing only observes: the states are
@@ -119,7 +170,7 @@ impl<M: CellModel> ReferenceRun<M> {
     pub fn frame(&self) -> Frame<M::Event> {
         Frame {
             step: self.step,
-            hash: self.state.hash::<M>(),
+            hash: self.hash,
             bodies: self.state.len(),
             events: Vec::new(),
         }
@@ -138,11 +189,23 @@ impl<M: CellModel> ReferenceRun<M> {
     /// [`ExecError::CellPanicked`] naming the cell and step, a contract violation (when
     /// checked) an [`ExecError::Contract`]. After an error the run stays at its last step.
     pub fn try_advance(&mut self) -> Result<Frame<M::Event>, ExecError> {
+        let step = self.step + 1;
+        // Every occupied cell is computed when the contract is checked (the checker covers
+        // every cell, and checks the promise of `at_rest` on the cells at rest) or when
+        // inputs apply (they may edit or remove any entity, wherever it is).
+        let whole = self.check || self.inputs.contains_key(&step);
+        let cells: Vec<usize> = if whole {
+            self.state.occupied().collect()
+        } else {
+            self.restless_cells()
+        };
         let mut next = std::mem::take(&mut self.spare);
-        next.reserve(self.state.len());
+        if whole {
+            next.reserve(self.state.len());
+        }
         let mut events = Vec::new();
         let mut firsts: Vec<CellResult<M>> = Vec::new();
-        for i in self.state.occupied() {
+        for &i in &cells {
             let c = self.grid.coord(i);
             let nb = self.state.neighbourhood(&self.grid, c);
             let t0 = self.costs.is_some().then(std::time::Instant::now);
@@ -165,6 +228,15 @@ impl<M: CellModel> ReferenceRun<M> {
             }
             if self.check {
                 contract::check_cell_outputs::<M>(&self.grid, c, self.step, &next[start..])?;
+                if self.neighbourhood_at_rest(i) {
+                    contract::check_at_rest::<M>(
+                        c,
+                        self.step,
+                        self.state.cell_at(i),
+                        &next[start..],
+                        &events[first_event..],
+                    )?;
+                }
                 firsts.push(CellResult {
                     cell: i,
                     out: next[start..].to_vec(),
@@ -186,21 +258,49 @@ impl<M: CellModel> ReferenceRun<M> {
                 ),
             })??;
         }
-        let step = self.step + 1;
-        if let Some(inputs) = self.inputs.remove(&step) {
-            next = apply_inputs::<M>(&self.grid, step, next, &inputs)?;
+        let unchanged = !whole && cells.is_empty();
+        if whole {
+            if let Some(inputs) = self.inputs.remove(&step) {
+                next = apply_inputs::<M>(&self.grid, step, next, &inputs)?;
+            }
+            self.spare = self
+                .state
+                .rebin::<M>(&self.grid, next, self.step, &mut events);
+            self.rest = (0..self.state.cell_count())
+                .map(|i| self.cell_at_rest(i))
+                .collect();
+            if self.check {
+                contract::check_unique_ids::<M>(&self.grid, &self.state, step)?;
+            }
+        } else if !cells.is_empty() {
+            // The computed cells are replaced by what lands in them; every other cell keeps
+            // its state, which is its own output (the promise of `at_rest`), unless an output
+            // of a computed neighbour lands in it.
+            let mut touched = cells.clone();
+            touched.extend(
+                next.iter()
+                    .filter_map(|s| self.grid.cell_of(M::position(s)))
+                    .map(|c| self.grid.index(c)),
+            );
+            touched.sort_unstable();
+            touched.dedup();
+            self.spare =
+                self.state
+                    .replace_cells::<M>(&self.grid, &cells, next, self.step, &mut events);
+            for i in touched {
+                self.rest[i] = self.cell_at_rest(i);
+            }
         }
-        self.spare = self
-            .state
-            .rebin::<M>(&self.grid, next, self.step, &mut events);
-        if self.check {
-            contract::check_unique_ids::<M>(&self.grid, &self.state, step)?;
+        // With no cell computed and no input, the state is the previous one, bit for bit,
+        // and so is its hash.
+        if !unchanged {
+            self.hash = self.state.hash::<M>();
         }
         events.sort();
         self.step = step;
         Ok(Frame {
             step: self.step,
-            hash: self.state.hash::<M>(),
+            hash: self.hash,
             bodies: self.state.len(),
             events,
         })

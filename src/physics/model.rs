@@ -695,6 +695,17 @@ impl CellModel for RigidBodyModel {
             + 2.0 * (self.max_radius + self.prediction());
         (reader.position - other.position).norm_squared() <= two * two
     }
+    /// Asleep, with both velocities exactly `+0.0`: an all-asleep neighbourhood gives every
+    /// body of the centre cell its frozen copy (same pose and counter, zero velocities,
+    /// SPEC.md §5.4), which is then the body itself, bit for bit, and raises no event.
+    fn at_rest(&self, b: &Body) -> bool {
+        self.is_asleep(b)
+            && b.linvel
+                .iter()
+                .chain(b.angvel.iter())
+                .all(|v| v.to_bits() == 0)
+    }
+
     fn hash_state(b: &Body, h: &mut StateHash) {
         for v in [&b.position, &b.linvel, &b.angvel] {
             for k in 0..3 {
