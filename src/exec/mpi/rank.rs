@@ -551,14 +551,7 @@ impl<M: CellModel> Rank<M> {
         } else {
             let mut counts = vec![0 as Count; self.ranks];
             root.gather_into_root(&count, &mut counts[..]);
-            let displs: Vec<Count> = counts
-                .iter()
-                .scan(0, |at, &c| {
-                    let d = *at;
-                    *at += c;
-                    Some(d)
-                })
-                .collect();
+            let displs = displacements(&counts);
             let mut all = vec![0u64; counts.iter().map(|&c| c as usize).sum()];
             {
                 let mut part = PartitionMut::new(&mut all[..], &counts[..], &displs[..]);
@@ -730,14 +723,7 @@ impl<M: CellModel> Rank<M> {
         let count = words.len() as Count;
         let mut counts = vec![0 as Count; self.ranks];
         self.comm.all_gather_into(&count, &mut counts[..]);
-        let displs: Vec<Count> = counts
-            .iter()
-            .scan(0, |at, &c| {
-                let d = *at;
-                *at += c;
-                Some(d)
-            })
-            .collect();
+        let displs = displacements(&counts);
         let mut all = vec![0u64; counts.iter().map(|&c| c as usize).sum()];
         {
             let mut part = PartitionMut::new(&mut all[..], &counts[..], &displs[..]);
@@ -801,4 +787,17 @@ impl<M: CellModel> Rank<M> {
                 .fold(0.0, f64::max),
         }
     }
+}
+
+/// Where each rank's part starts in a gathered buffer of parts of `counts` words, in rank
+/// order (the displacements of `MPI_Gatherv` / `MPI_Allgatherv`).
+fn displacements(counts: &[Count]) -> Vec<Count> {
+    counts
+        .iter()
+        .scan(0, |at, &c| {
+            let d = *at;
+            *at += c;
+            Some(d)
+        })
+        .collect()
 }
