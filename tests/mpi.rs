@@ -4,10 +4,13 @@
 //! writes the outputs; a planted fault in the transport is caught, and a rank that panics
 //! stops every rank within seconds, naming the rank and the step.
 //!
-//! Needs Open MPI (`scripts/install-mpi-deps.sh`): `cargo test --release --features mpi --test
-//! mpi`. Scenes are small and runs short (the whole file takes well under a minute on two
-//! cores).
-#![cfg(feature = "mpi")]
+//! Needs Open MPI and a `soda` built with the `mpi` feature. `scripts/test-mpi.sh` does it all
+//! (and `.ci/run` calls it): it installs Open MPI, builds that binary alone, and runs these
+//! tests with `SODA_MPI_BIN` naming it. The test binary itself needs no MPI, so it is built with
+//! the default features and the dev-dependencies are not rebuilt. Without the feature the
+//! tests are ignored; `cargo test --release --features mpi --test mpi` runs them against the
+//! build's own binary. Scenes are small and runs short (the whole file takes well under a
+//! minute on two cores).
 
 mod cli_support;
 
@@ -15,12 +18,31 @@ use cli_support::{hash_line, ok, stderr, stdout};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
+/// The `soda` binary built with the `mpi` feature: this build's own when the tests are built
+/// with the feature, else the one `SODA_MPI_BIN` names (`scripts/test-mpi.sh` sets it).
+fn soda_mpi() -> String {
+    if cfg!(feature = "mpi") {
+        return env!("CARGO_BIN_EXE_soda").to_string();
+    }
+    let bin = std::env::var("SODA_MPI_BIN").unwrap_or_else(|_| {
+        panic!(
+            "SODA_MPI_BIN is not set: run scripts/test-mpi.sh, which builds soda with \
+             `--features mpi` and names it, or `cargo test --release --features mpi --test mpi`"
+        )
+    });
+    assert!(
+        std::path::Path::new(&bin).is_file(),
+        "SODA_MPI_BIN={bin} is not a file: scripts/test-mpi.sh builds it"
+    );
+    bin
+}
+
 /// Runs `mpirun -np ranks soda args` (as root if need be, more ranks than cores allowed).
 fn mpirun(ranks: usize, args: &[&str], env: &[(&str, &str)]) -> Output {
     let mut cmd = Command::new("mpirun");
     cmd.args(["--allow-run-as-root", "--oversubscribe", "-np"])
         .arg(ranks.to_string())
-        .arg(env!("CARGO_BIN_EXE_soda"))
+        .arg(soda_mpi())
         .args(args)
         .current_dir(env!("CARGO_MANIFEST_DIR"));
     for (k, v) in env {
@@ -48,6 +70,10 @@ fn hash(out: &str) -> String {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
 fn every_scene_and_mode_commits_the_reference_hash_on_2_3_and_4_ranks() {
     let scenes = [
         "falling-cubes",
@@ -90,6 +116,10 @@ fn every_scene_and_mode_commits_the_reference_hash_on_2_3_and_4_ranks() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
 fn balancing_across_ranks_commits_the_reference_hash() {
     let base = [
         "run",
@@ -129,6 +159,10 @@ fn balancing_across_ranks_commits_the_reference_hash() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
 fn registered_models_and_inputs_commit_the_reference_hash() {
     for model in ["epidemic", "phold"] {
         let base = [
@@ -177,6 +211,10 @@ fn registered_models_and_inputs_commit_the_reference_hash() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
 fn rank_0_alone_writes_the_record_and_the_counters() {
     let dir = tempfile::tempdir().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
@@ -235,6 +273,10 @@ fn fails_soon(ranks: usize, args: &[&str], bug: &str) -> String {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
 fn a_damaged_batch_stops_every_rank_with_an_error() {
     let args = [
         "run",
@@ -254,6 +296,10 @@ fn a_damaged_batch_stops_every_rank_with_an_error() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
 fn a_panicking_rank_stops_every_rank_naming_the_rank_and_step() {
     let args = [
         "run",
@@ -276,6 +322,10 @@ fn a_panicking_rank_stops_every_rank_naming_the_rank_and_step() {
 }
 
 #[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
 fn lost_anti_messages_stop_every_rank_with_an_error() {
     // Random territories: rollbacks send anti-messages between ranks, and the planted fault
     // loses every one of them (counted as sent, never sent). The next GVT round finds them
@@ -320,6 +370,10 @@ fn lost_anti_messages_stop_every_rank_with_an_error() {
 /// where (`interrupted at step N, hash H`), `H` is the reference's hash at step `N`, the
 /// record holds whole frames only, and no rank is left running.
 #[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
 fn ctrl_c_on_mpirun_stops_every_rank_at_a_committed_step_and_says_where() {
     use std::process::Stdio;
     let dir = tempfile::tempdir().unwrap();
@@ -327,7 +381,7 @@ fn ctrl_c_on_mpirun_stops_every_rank_at_a_committed_step_and_says_where() {
     let scene = ["--scene", "falling-cubes", "--objects", "300"];
     let mut child = Command::new("mpirun")
         .args(["--allow-run-as-root", "--oversubscribe", "-np", "2"])
-        .arg(env!("CARGO_BIN_EXE_soda"))
+        .arg(soda_mpi())
         .arg("run")
         .args(scene)
         .args(["--steps", "1000000", "--executor", "mpi", "--worlds", "3"])
