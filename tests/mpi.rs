@@ -426,3 +426,97 @@ fn ctrl_c_on_mpirun_stops_every_rank_at_a_committed_step_and_says_where() {
         "the record ends at step {step}: {last}"
     );
 }
+
+#[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
+fn verify_under_mpirun_checks_mpi_runs_and_names_a_planted_kernel_bug() {
+    // Correct: every MPI run (per mode) and the in-process runs commit the reference's
+    // hashes; rank 0 alone prints.
+    let args = [
+        "verify",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "200",
+        "--steps",
+        "30",
+        "--worlds",
+        "5",
+        "--partition",
+        "random",
+        "--mpi-repeats",
+        "1",
+        "--schedules",
+        "1",
+        "--repeats",
+        "0",
+    ];
+    let out = mpi_ok(3, &args);
+    assert_eq!(out.matches("verify ").count(), 1, "{out}");
+    for mode in ["cell", "world", "conservative"] {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with("ok       mpi") && l.contains(mode))
+            .unwrap_or_else(|| panic!("no MPI {mode} line in:\n{out}"));
+        assert!(line.contains("3 ranks: 30 steps match"), "{line}");
+    }
+    assert!(out.contains("all 6 runs committed"), "{out}");
+    // A registered model, too.
+    let out = mpi_ok(
+        2,
+        &[
+            "verify",
+            "--model",
+            "phold",
+            "--steps",
+            "15",
+            "--mpi-repeats",
+            "1",
+            "--schedules",
+            "0",
+            "--repeats",
+            "0",
+        ],
+    );
+    assert!(out.contains("2 ranks: 15 steps match"), "{out}");
+    // A kernel bug (the cutoff compares ids only): the MPI runs diverge, the first difference
+    // is named and the reproducing command runs under mpirun.
+    let bad = [
+        "verify",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "400",
+        "--steps",
+        "60",
+        "--worlds",
+        "6",
+        "--partition",
+        "random",
+        "--modes",
+        "cell",
+        "--mpi-repeats",
+        "3",
+        "--schedules",
+        "0",
+        "--repeats",
+        "0",
+        "--planted-bug",
+        "cutoff-by-ids-only",
+    ];
+    let o = mpirun(3, &bad, &[]);
+    assert!(!o.status.success(), "the planted bug was not caught");
+    let out = stdout(&o);
+    let line = out
+        .lines()
+        .find(|l| l.starts_with("DIVERGED mpi"))
+        .unwrap_or_else(|| panic!("no diverged MPI run in:\n{out}\n{}", stderr(&o)));
+    assert!(line.contains("first divergence at step"), "{line}");
+    assert!(
+        out.contains("reproduce: mpirun -np 3 soda run") && out.contains("--executor mpi"),
+        "{out}"
+    );
+}

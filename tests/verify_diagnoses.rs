@@ -257,3 +257,31 @@ fn zero_schedules_and_repeats_do_not_pass() {
     assert!(!report.passed());
     assert_eq!(report.diagnosis(), vec![Diagnosis::NothingChecked]);
 }
+
+/// Without the `mpi` feature an MPI run cannot start: each one asked for fails saying how to
+/// build it, and the report does not pass (never a silent pass without the runs).
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn mpi_runs_without_the_mpi_feature_fail_saying_to_rebuild_with_it() {
+    use soda::verify::RunOutcome;
+    let options = VerifyOptions {
+        schedules: 1,
+        repeats: 0,
+        mpi_repeats: 2,
+        ..options()
+    };
+    let report = verify(&setup(Bug::None), &options);
+    assert!(!report.passed(), "{}", report.summary());
+    let mpi: Vec<_> = report
+        .runs
+        .iter()
+        .filter(|r| r.executor == ExecutorKind::Mpi)
+        .collect();
+    assert_eq!(mpi.len(), 2 * options.modes.len());
+    for r in mpi {
+        match &r.outcome {
+            RunOutcome::Failed(e) => assert!(e.to_string().contains("--features mpi"), "{e}"),
+            other => panic!("an MPI run without MPI ended as {other:?}"),
+        }
+    }
+}

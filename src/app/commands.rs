@@ -144,6 +144,21 @@ pub fn verify(
     size: &ModelSize,
     options: &VerifyOptions,
 ) -> Result<()> {
+    // MPI runs: every rank runs this, only rank 0 checks and prints.
+    #[cfg(feature = "mpi")]
+    let session = if options.mpi_repeats > 0 {
+        Some(crate::exec::mpi::Session::init()?)
+    } else {
+        None
+    };
+    #[cfg(feature = "mpi")]
+    let root = session.as_ref().is_none_or(|s| s.is_root());
+    #[cfg(not(feature = "mpi"))]
+    let root = true;
+    if !root {
+        model.verify(size, options, &mut |_| {});
+        return Ok(());
+    }
     println!(
         "verify           {} ({}), {} steps, {} worlds, window {}, {} threads",
         model.name(),

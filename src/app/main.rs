@@ -160,6 +160,10 @@ struct VerifyArgs {
     /// Threaded runs per mode.
     #[arg(long, value_name = "R", default_value_t = 3)]
     repeats: u64,
+    /// MPI runs per mode, across the processes of the MPI job this runs in (`mpirun -np R
+    /// BINARY verify --mpi-repeats K`, built with the `mpi` feature); rank 0 prints.
+    #[arg(long, value_name = "K", default_value_t = 0)]
+    mpi_repeats: u64,
     /// Threads of the threaded runs [default: the available cores].
     #[arg(long, value_name = "T")]
     threads: Option<usize>,
@@ -270,6 +274,7 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                 modes: parse_modes(&a.modes)?,
                 schedules: a.schedules,
                 repeats: a.repeats,
+                mpi_repeats: a.mpi_repeats,
                 threads: threads(a.threads),
                 ..VerifyOptions::default()
             };

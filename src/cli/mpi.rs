@@ -15,8 +15,14 @@ pub struct Role {
 impl Role {
     /// The role of this process in a run with `options` (initialises MPI for an MPI run).
     pub fn of(options: &RunOptions) -> Result<Self> {
+        Self::under_mpi(options.executor == ExecutorKind::Mpi)
+    }
+
+    /// The role of this process in a command that runs under `mpirun` if `mpi` (initialises
+    /// MPI then), or alone.
+    pub fn under_mpi(mpi: bool) -> Result<Self> {
         #[cfg(feature = "mpi")]
-        if options.executor == ExecutorKind::Mpi {
+        if mpi {
             let session = soda::exec::mpi::Session::init()?;
             return Ok(Role {
                 root: session.is_root(),
@@ -24,7 +30,7 @@ impl Role {
             });
         }
         #[cfg(not(feature = "mpi"))]
-        if options.executor == ExecutorKind::Mpi {
+        if mpi {
             anyhow::bail!("{}", soda::exec::error::MpiError::NotBuilt);
         }
         Ok(Role {

@@ -21,6 +21,7 @@ Examples:
   soda verify                                        125 falling cubes, 8 worlds, all modes
   soda verify --scene sparse-gas --worlds 16 --schedules 50
   soda verify --scene chain --modes cell,world --threads 4 --repeats 10
+  mpirun -np 3 soda verify --mpi-repeats 2           also across 3 processes (--features mpi)
 
 Every line names one run and whether each of its committed steps hashed like the
 reference's. A divergence names the first step, body, field and cell that differ and
@@ -78,6 +79,13 @@ pub struct VerifyArgs {
           value_parser = whole(0, u64::MAX))]
     pub repeats: u64,
 
+    /// MPI runs per mode, across the processes of the MPI job this runs in: `mpirun -np R
+    /// soda verify --mpi-repeats K` (a soda built with `--features mpi`). Every rank runs the
+    /// same command; rank 0 runs every other check and prints.
+    #[arg(long, value_name = "K", default_value_t = 0, help_heading = "Run",
+          value_parser = whole(0, u64::MAX))]
+    pub mpi_repeats: u64,
+
     /// Optimism window.
     #[arg(long, value_name = "W", default_value_t = 16, help_heading = "Run",
           value_parser = whole(1, 1_000_000))]
@@ -109,6 +117,8 @@ struct Check {
     executor: ExecutorKind,
     mode: RollbackMode,
     seed: Option<u64>,
+    /// Ranks of an MPI run.
+    ranks: Option<usize>,
 }
 
 /// Runs the command: a wrapper over the library's [`soda::verify`] for a scene.
@@ -120,12 +130,15 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     }
     let (scene, origin) = scene_args.load()?;
     let modes = parse_modes(&args.modes)?;
-    if args.schedules == 0 && args.repeats == 0 {
+    if args.schedules == 0 && args.repeats == 0 && args.mpi_repeats == 0 {
         bail!(
             "--schedules 0 and --repeats 0 leave no run to check: give at least one schedule \
-             (--schedules K) or threaded run (--repeats R)"
+             (--schedules K), threaded run (--repeats R) or MPI run (--mpi-repeats K)"
         );
     }
+    // Under mpirun: MPI starts before anything is printed, and only rank 0 prints.
+    let role = super::mpi::Role::under_mpi(args.mpi_repeats > 0)?;
+    let root = role.root();
     if args.partition_seed.is_some() && args.partition == PartitionArg::Blocks {
         bail!(
             "--partition-seed seeds the kmeans and random partitioners, and blocks has \
@@ -147,9 +160,15 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         schedules: args.schedules,
         repeats: args.repeats,
         threads,
+        mpi_repeats: args.mpi_repeats,
         check_contract: true,
     };
     let setup = VerifySetup::new(scene.model(), scene.grid(), scene.initial_bodies());
+    if !root {
+        // A follower takes part in the MPI runs; rank 0 checks and prints.
+        verify_with_progress(&setup, &options, |_| {});
+        return Ok(());
+    }
     print(&format!(
         "verify           {} ({origin}), {} steps, {} worlds ({} partition), window {}, {} thread{}\n",
         scene.name,
@@ -160,7 +179,7 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         threads,
         if threads == 1 { "" } else { "s" },
     ))?;
-    let runs = modes.len() as u64 * (args.schedules + args.repeats);
+    let runs = modes.len() as u64 * (args.schedules + args.repeats + args.mpi_repeats);
     let progress = super::output::runs_bar(runs);
     let mut printed = Ok(());
     let report = verify_with_progress(&setup, &options, |check| {
@@ -175,6 +194,7 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
                 executor: check.executor,
                 mode: check.mode,
                 seed: check.schedule_seed,
+                ranks: check.ranks,
             };
             text += &format!(
                 "         reproduce: {}\n",
@@ -223,7 +243,10 @@ fn reproduce(
     step: u64,
     threads: usize,
 ) -> String {
-    let mut cmd = format!("soda run --scene {}", scene.scene);
+    let mut cmd = match check.ranks {
+        Some(r) => format!("mpirun -np {r} soda run --scene {}", scene.scene),
+        None => format!("soda run --scene {}", scene.scene),
+    };
     if let Some(n) = scene.objects {
         cmd += &format!(" --objects {n}");
     }
@@ -244,9 +267,10 @@ fn reproduce(
     if args.ghosts == GhostsArg::Full {
         cmd += " --ghosts full";
     }
-    match check.seed {
-        Some(seed) => cmd += &format!(" --schedule-seed {seed}"),
-        None => cmd += &format!(" --threads {threads}"),
+    match (check.seed, check.ranks) {
+        (Some(seed), _) => cmd += &format!(" --schedule-seed {seed}"),
+        (None, None) => cmd += &format!(" --threads {threads}"),
+        (None, Some(_)) => {}
     }
     if let Some(b) = args.planted_bug {
         cmd += match b {
@@ -254,7 +278,7 @@ fn reproduce(
             PlantedBugArg::DropLoneAnti => " --planted-bug drop-lone-anti",
         };
     }
-    if check.seed.is_none() {
+    if check.seed.is_none() && check.ranks.is_none() {
         cmd += "  (a threaded interleaving may not recur: rerun a few times, or use soda verify)";
     }
     cmd

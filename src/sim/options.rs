@@ -132,6 +132,17 @@ impl RunOptions {
         }
     }
 
+    /// The MPI executor with `kernel`: the worlds spread over the ranks of the MPI job this
+    /// process belongs to (cargo feature `mpi`; without it the run fails saying so).
+    pub fn mpi(kernel: KernelConfig) -> Self {
+        RunOptions {
+            executor: ExecutorKind::Mpi,
+            kernel,
+            threads: 1,
+            ..Self::default()
+        }
+    }
+
     /// The same options with the threaded executor's laggard lead `lead`.
     pub fn lead(mut self, lead: u64) -> Self {
         self.lead = lead;

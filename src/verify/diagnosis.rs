@@ -63,7 +63,7 @@ impl fmt::Display for Diagnosis {
             Diagnosis::NothingChecked => {
                 write!(
                     f,
-                    "no executor run was checked (schedules and repeats are both 0)"
+                    "no executor run was checked (schedules, repeats and MPI runs are all 0)"
                 )
             }
         }

@@ -19,6 +19,8 @@ pub struct RunCheck {
     pub schedule_seed: Option<u64>,
     /// Threads (threaded runs; 1 otherwise).
     pub threads: usize,
+    /// Ranks of the MPI job (MPI runs; `None` otherwise).
+    pub ranks: Option<usize>,
     /// The kernel's counters of the run (`None` if it failed).
     pub counters: Option<Counters>,
     /// The virtual executor's replay string of the run (`None` for threaded runs).
@@ -71,6 +73,13 @@ impl fmt::Display for Mismatch {
 impl RunCheck {
     /// The run's configuration in one line.
     pub fn name(&self) -> String {
+        if let Some(ranks) = self.ranks {
+            return format!(
+                "{:<9}{:<13} {ranks} ranks",
+                self.executor.name(),
+                self.mode.name()
+            );
+        }
         match self.schedule_seed {
             Some(seed) => format!(
                 "{:<9}{:<13} schedule-seed {seed}",
@@ -134,6 +143,10 @@ pub struct VerifyReport {
     pub contract: Option<ContractViolation>,
     /// Every executor run, in the order they ran.
     pub runs: Vec<RunCheck>,
+    /// This process is a rank other than 0 of the MPI job of the MPI runs
+    /// ([`VerifyOptions::mpi_repeats`](super::VerifyOptions::mpi_repeats)): it took part in
+    /// them and checked nothing. Rank 0's report is the result; this one passes.
+    pub follower: bool,
 }
 
 impl VerifyReport {
@@ -148,7 +161,7 @@ impl VerifyReport {
     /// Whether everything held: the reference reproducible, the contract kept, every run
     /// matched, and at least one run was checked.
     pub fn passed(&self) -> bool {
-        self.diagnosis().is_empty() && !self.runs.is_empty()
+        self.follower || (self.diagnosis().is_empty() && !self.runs.is_empty())
     }
 
     /// The runs that did not match.

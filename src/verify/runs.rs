@@ -66,6 +66,11 @@ pub struct VerifyOptions {
     pub repeats: u64,
     /// Threads of the threaded runs.
     pub threads: usize,
+    /// MPI runs per mode, on the MPI job this process belongs to (`mpirun -np R`, cargo
+    /// feature `mpi`; SPEC.md §14): every rank calls [`verify`] with the same options, every
+    /// rank takes part in these runs, rank 0 alone compares them with the reference and makes
+    /// the other checks. 0: none, and MPI is not touched.
+    pub mpi_repeats: u64,
     /// Run the contract checker over the reference (about the cost of one more reference
     /// run).
     pub check_contract: bool,
@@ -88,6 +93,7 @@ impl Default for VerifyOptions {
             schedules: 8,
             repeats: 3,
             threads: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            mpi_repeats: 0,
             check_contract: true,
         }
     }
@@ -108,6 +114,53 @@ pub fn verify_with_progress<M: CellModel + Clone + 'static>(
     mut progress: impl FnMut(&RunCheck),
 ) -> VerifyReport {
     let steps = options.steps;
+    let job = match MpiJob::join(options.mpi_repeats) {
+        Ok(job) => job,
+        Err(e) => {
+            // MPI could not start: every MPI run fails with the reason.
+            let mut report = verify_here(setup, options, None, &mut progress);
+            for &mode in &options.modes {
+                for _ in 0..options.mpi_repeats {
+                    let check = failed_mpi(mode, e.clone());
+                    progress(&check);
+                    report.runs.push(check);
+                }
+            }
+            return report;
+        }
+    };
+    if let Some(job) = job.as_ref().filter(|j| !j.root) {
+        // A follower: the MPI runs, in rank 0's order, and nothing else.
+        for &mode in &options.modes {
+            for _ in 0..options.mpi_repeats {
+                let run = RunOptions::mpi(options.kernel.clone().mode(mode));
+                // Rank 0 reports how the run went, errors included.
+                let _ = setup.runner().options(run).run_quiet(steps);
+            }
+        }
+        let _ = job;
+        return VerifyReport {
+            steps,
+            reference_hashes: Vec::new(),
+            reference_repeat: None,
+            reference_error: None,
+            contract: None,
+            runs: Vec::new(),
+            follower: true,
+        };
+    }
+    verify_here(setup, options, job.as_ref(), &mut progress)
+}
+
+/// Every check made in this process: the reference twice, the MPI runs (rank 0 of `job`),
+/// the contract, the virtual and the threaded runs.
+fn verify_here<M: CellModel + Clone + 'static>(
+    setup: &VerifySetup<M>,
+    options: &VerifyOptions,
+    job: Option<&MpiJob>,
+    progress: &mut impl FnMut(&RunCheck),
+) -> VerifyReport {
+    let steps = options.steps;
     let mut expected = Vec::with_capacity(steps as usize);
     let reference = setup.runner().run(steps, |f, _, _| expected.push(f.hash));
     let mut report = VerifyReport {
@@ -117,6 +170,7 @@ pub fn verify_with_progress<M: CellModel + Clone + 'static>(
         reference_error: reference.err(),
         contract: None,
         runs: Vec::new(),
+        follower: false,
     };
     // A second reference run must commit the same hashes.
     let expected = Arc::new(report.reference_hashes.clone());
@@ -126,6 +180,18 @@ pub fn verify_with_progress<M: CellModel + Clone + 'static>(
             RunOutcome::Diverged(m) => Some(m),
             _ => None,
         });
+    if let Some(job) = job {
+        // First, so that the other ranks are done soonest.
+        for &mode in &options.modes {
+            for _ in 0..options.mpi_repeats {
+                let run = RunOptions::mpi(options.kernel.clone().mode(mode));
+                let mut check = check_run(setup, &run, mode, None, steps, &expected);
+                check.ranks = Some(job.ranks);
+                progress(&check);
+                report.runs.push(check);
+            }
+        }
+    }
     if options.check_contract {
         let checked = setup.runner().check_contract(true).run_quiet(steps);
         if let Err(ExecError::Contract(v)) = checked {
@@ -151,6 +217,52 @@ pub fn verify_with_progress<M: CellModel + Clone + 'static>(
         }
     }
     report
+}
+
+/// This process's place in the MPI job of the MPI runs, held for all of them (MPI starts
+/// once per process).
+struct MpiJob {
+    /// Ranks of the job.
+    ranks: usize,
+    /// Whether this is rank 0, which compares.
+    root: bool,
+    #[cfg(feature = "mpi")]
+    _session: crate::exec::mpi::Session,
+}
+
+impl MpiJob {
+    /// Joins the MPI job if there are MPI runs (`None` if not).
+    fn join(repeats: u64) -> Result<Option<MpiJob>, ExecError> {
+        if repeats == 0 {
+            return Ok(None);
+        }
+        #[cfg(feature = "mpi")]
+        {
+            let session = crate::exec::mpi::Session::init()?;
+            Ok(Some(MpiJob {
+                ranks: session.size(),
+                root: session.is_root(),
+                _session: session,
+            }))
+        }
+        #[cfg(not(feature = "mpi"))]
+        Err(crate::exec::error::MpiError::NotBuilt.into())
+    }
+}
+
+/// An MPI run that could not start.
+fn failed_mpi(mode: RollbackMode, e: ExecError) -> RunCheck {
+    RunCheck {
+        executor: ExecutorKind::Mpi,
+        mode,
+        schedule_seed: None,
+        threads: 1,
+        ranks: None,
+        counters: None,
+        replay: None,
+        steps_matched: 0,
+        outcome: RunOutcome::Failed(e),
+    }
 }
 
 /// One executor run compared with the reference.
@@ -191,6 +303,7 @@ fn check_run<M: CellModel + Clone + 'static>(
         } else {
             1
         },
+        ranks: None,
         counters: kernel.as_ref().map(|k| k.counters.clone()),
         replay: kernel.and_then(|k| k.schedule),
         steps_matched,
