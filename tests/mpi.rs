@@ -520,3 +520,71 @@ fn verify_under_mpirun_checks_mpi_runs_and_names_a_planted_kernel_bug() {
         "{out}"
     );
 }
+
+#[test]
+#[cfg_attr(
+    not(feature = "mpi"),
+    ignore = "needs a soda built with the mpi feature: scripts/test-mpi.sh"
+)]
+fn several_threads_per_rank_commit_the_reference_hash_and_a_panic_on_one_stops_every_rank() {
+    // Ranks × threads × worlds × mode, random partitions: the same hash as the reference.
+    let base = [
+        "run",
+        "--scene",
+        "sparse-gas",
+        "--objects",
+        "300",
+        "--steps",
+        "40",
+    ];
+    let reference = hash(&ok(&base));
+    for (ranks, threads, worlds, mode, seed) in [
+        (2, "2", "6", "cell", "1"),
+        (3, "2", "7", "world", "2"),
+        (2, "3", "5", "conservative", "3"),
+    ] {
+        let mut args = base.to_vec();
+        args.extend([
+            "--executor",
+            "mpi",
+            "--threads",
+            threads,
+            "--worlds",
+            worlds,
+            "--mode",
+            mode,
+            "--partition",
+            "random",
+            "--partition-seed",
+            seed,
+        ]);
+        let out = mpi_ok(ranks, &args);
+        assert_eq!(
+            hash(&out),
+            reference,
+            "{ranks} ranks × {threads} threads, {mode}"
+        );
+        assert!(
+            out.contains(&format!("{threads} threads per rank, {ranks} ranks")),
+            "{out}"
+        );
+    }
+    // A world panicking on any of a rank's threads stops every rank, naming rank and step.
+    let args = [
+        "run",
+        "--objects",
+        "200",
+        "--steps",
+        "60",
+        "--executor",
+        "mpi",
+        "--worlds",
+        "6",
+        "--threads",
+        "2",
+    ];
+    let err = fails_soon(3, &args, "panic:1:10");
+    assert!(err.contains("MPI rank 1 of 3"), "{err}");
+    assert!(err.contains("panicked while computing from step"), "{err}");
+    assert!(err.contains("planted panic"), "{err}");
+}

@@ -96,7 +96,8 @@ pub struct ExecutorArgs {
     /// `virtual`]. Virtual and threaded only.
     #[arg(long, value_name = "N", value_parser = whole(1, 4096))]
     pub worlds: Option<u64>,
-    /// OS threads of the threaded executor [default: the available cores].
+    /// OS threads of the threaded executor [default: the available cores], or of each rank
+    /// under `--executor mpi` [default: 1].
     #[arg(long, value_name = "T", value_parser = whole(1, 256))]
     pub threads: Option<u64>,
     /// Rollback mode [default: cell]. Virtual and threaded only.
@@ -258,8 +259,14 @@ impl ExecutorArgs {
                 );
             }
         }
-        if self.threads.is_some() && executor != ExecutorKind::Threaded {
-            bail!("--threads applies to the threaded executor only: add `--executor threaded`");
+        if self.threads.is_some()
+            && executor != ExecutorKind::Threaded
+            && executor != ExecutorKind::Mpi
+        {
+            bail!(
+                "--threads applies to the threaded and MPI executors only: add `--executor \
+                 threaded` (or, under mpirun, `--executor mpi`)"
+            );
         }
         if self.lead.is_some() && executor != ExecutorKind::Threaded {
             bail!(
@@ -280,7 +287,12 @@ impl ExecutorArgs {
             })?,
             (None, seed) => ScheduleSpec::Seeded(seed.unwrap_or(0)),
         };
-        let threads = self.threads.map_or_else(default_threads, |t| t as usize);
+        // Under MPI, threads per rank: one unless asked (ranks usually match the cores).
+        let threads = match (executor, self.threads) {
+            (_, Some(t)) => t as usize,
+            (ExecutorKind::Mpi, None) => 1,
+            (_, None) => default_threads(),
+        };
         let default_worlds = match executor {
             ExecutorKind::Threaded => threads,
             _ => 4,

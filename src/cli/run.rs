@@ -777,13 +777,16 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
         lines.push((
             "worlds",
             format!(
-                "{} ({} partition), mode {}, window {}, {} thread{}",
+                "{} ({} partition), mode {}, window {}, {} thread{}{}",
                 k.worlds,
                 k.partition.name(),
                 k.mode.name(),
                 k.window,
                 k.threads,
-                if k.threads == 1 { "" } else { "s" }
+                if k.threads == 1 { "" } else { "s" },
+                k.mpi
+                    .as_ref()
+                    .map_or(String::new(), |m| format!(" per rank, {} ranks", m.ranks))
             ),
         ));
         lines.push((

@@ -71,6 +71,12 @@ pub enum MpiError {
     /// MPI could not be initialised (or was finalised already: one MPI run per process).
     #[error("MPI could not be initialised (it was already finalised in this process)")]
     Init,
+    /// Several threads per rank, but the MPI library offers no `MPI_THREAD_FUNNELED`.
+    #[error(
+        "--threads {0} per rank needs an MPI library with MPI_THREAD_FUNNELED support, and this \
+         one has none: run one thread per rank (more ranks instead)"
+    )]
+    NoThreads(usize),
     /// A kernel option the MPI executor does not support.
     #[error("{0} is not supported by the MPI executor")]
     Unsupported(&'static str),

@@ -458,6 +458,7 @@ fn run_on_mpi<M: CellModel>(
     use crate::exec::mpi::{run_mpi_controlled, MpiOptions, MpiSetup};
     let mut mpi_options = MpiOptions::new(&options.kernel, steps);
     mpi_options.wanted = wanted;
+    mpi_options.threads = options.threads.max(1);
     let report = run_mpi_controlled(
         MpiSetup {
             model: start.model,
@@ -468,7 +469,14 @@ fn run_on_mpi<M: CellModel>(
         &mpi_options,
         sink,
     )?;
-    let mut kernel = kernel_report(options, 1, None, report.counters, None, report.balance);
+    let mut kernel = kernel_report(
+        options,
+        mpi_options.threads,
+        None,
+        report.counters,
+        None,
+        report.balance,
+    );
     kernel.mpi = Some(report.stats);
     Ok((Some(kernel), report.initial_events, None))
 }

@@ -1,5 +1,6 @@
 //! The MPI executor (cargo feature `mpi`; SPEC.md §14): the worlds of one Time Warp run spread
-//! over the ranks of an MPI job, each rank one process driving its worlds on one thread.
+//! over the ranks of an MPI job, each rank one process driving its worlds on one thread or,
+//! with `threads > 1`, on several (only the rank's main thread calls MPI).
 //!
 //! - **Worlds to ranks**: world `w` of `W` runs on rank `w · R / W` (contiguous blocks of
 //!   world ids, so neighbouring territories of the blocks partitioner share a rank). Every
@@ -30,6 +31,8 @@
 mod rank;
 pub mod wire;
 
+mod parallel;
+
 pub use rank::{run_mpi_controlled, MpiOptions, MpiReport, MpiSetup, Sink};
 
 use super::error::MpiError;
@@ -39,6 +42,16 @@ use std::sync::Mutex;
 
 /// The MPI environment of this process, while a [`Session`] holds it.
 static UNIVERSE: Mutex<Option<Universe>> = Mutex::new(None);
+
+/// Whether the MPI library granted `MPI_THREAD_FUNNELED` (worker threads beside the one
+/// that calls MPI) when this process initialised it.
+static FUNNELED: Mutex<bool> = Mutex::new(false);
+
+/// Whether a rank may run its worlds on several threads (the MPI library granted
+/// `MPI_THREAD_FUNNELED`).
+pub(crate) fn threads_allowed() -> bool {
+    *FUNNELED.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 /// MPI initialised for this process: `MPI_Init` when the first session starts,
 /// `MPI_Finalize` when it ends. MPI can be initialised once per process, so a process runs
@@ -60,7 +73,11 @@ impl Session {
             if mpi::environment::is_initialized() {
                 return Err(MpiError::Init);
             }
-            *universe = Some(mpi::initialize().ok_or(MpiError::Init)?);
+            // Funneled: a rank's worker threads compute, only its main thread calls MPI.
+            let (u, level) =
+                mpi::initialize_with_threading(mpi::Threading::Funneled).ok_or(MpiError::Init)?;
+            *universe = Some(u);
+            *FUNNELED.lock().unwrap_or_else(|e| e.into_inner()) = level >= mpi::Threading::Funneled;
         }
         let world = SimpleCommunicator::world();
         Ok(Session {

@@ -1,6 +1,7 @@
 //! One rank of an MPI run: its worlds, its sends and receives, the GVT rounds, committing at
 //! rank 0 and balancing rounds ([module docs](super)).
 
+use super::parallel::{Pool, Turn};
 use super::wire;
 use super::{PlantedTransportBug, Session};
 use crate::exec::control::RunControl;
@@ -62,6 +63,9 @@ pub struct MpiOptions {
     /// Actions a rank takes between two GVT rounds; a rank with nothing to do joins the
     /// round at once. 0: 8 per world of the rank.
     pub round_actions: usize,
+    /// Threads of each rank (SPEC.md §14): the rank's worlds run on this many threads between
+    /// GVT rounds, and only the rank's main thread calls MPI. 1: one thread.
+    pub threads: usize,
     /// Seconds a GVT round may wait for messages sent between ranks (every rank has stopped
     /// sending, so they only have to arrive) before the run stops with an error naming what
     /// was lost. Default 30 (`SODA_MPI_ROUND_TIMEOUT` overrides it).
@@ -70,13 +74,14 @@ pub struct MpiOptions {
 
 impl MpiOptions {
     /// `kernel` for `steps` steps, no states wanted, 8 actions per local world between
-    /// rounds, rounds that wait at most 30 s for messages in transit.
+    /// rounds, one thread per rank, rounds that wait at most 30 s for messages in transit.
     pub fn new(kernel: &KernelConfig, steps: u64) -> Self {
         MpiOptions {
             kernel: kernel.clone(),
             steps,
             wanted: StatesWanted::none(),
             round_actions: 0,
+            threads: 1,
             round_timeout_seconds: std::env::var("SODA_MPI_ROUND_TIMEOUT")
                 .ok()
                 .and_then(|v| v.parse::<f64>().ok())
@@ -129,6 +134,10 @@ pub fn run_mpi_controlled<M: CellModel>(
         return Err(MpiError::Unsupported("a run trace (--trace)").into());
     }
     let session = Session::init()?;
+    let threads = options.threads.max(1);
+    if threads > 1 && !super::threads_allowed() {
+        return Err(MpiError::NoThreads(threads).into());
+    }
     let started = Instant::now();
     let MpiSetup {
         model,
@@ -202,6 +211,7 @@ pub fn run_mpi_controlled<M: CellModel>(
         last_round: 0,
         inputs_posted: Vec::new(),
         round_actions,
+        threads,
         round_timeout: Duration::from_secs_f64(options.round_timeout_seconds),
     };
     rank.next_round = rank.balancer.next_round_after(0);
@@ -272,6 +282,8 @@ struct Rank<M: CellModel> {
     /// One copy of every input (re-posted after a balancing round moves cells).
     inputs_posted: Vec<Message<M::State>>,
     round_actions: usize,
+    /// Threads acting on this rank's worlds between GVT rounds.
+    threads: usize,
     /// How long a GVT round may wait for messages in transit before the run stops.
     round_timeout: Duration,
 }
@@ -386,6 +398,18 @@ impl<M: CellModel> Rank<M> {
 
     /// Receives every batch that has arrived and puts its messages in the inboxes.
     fn poll(&mut self) {
+        let local = std::mem::take(&mut self.local);
+        let got = self.receive_batches(&local);
+        self.local = local;
+        for (i, m) in got {
+            self.worlds[i].receive(m);
+        }
+    }
+
+    /// Receives every batch that has arrived: its messages with the index of the local world
+    /// (`local`: world id → index) each is for.
+    fn receive_batches(&mut self, local: &[Option<usize>]) -> Vec<(usize, Message<M::State>)> {
+        let mut got = Vec::new();
         while let Some(probed) = self
             .comm
             .any_process()
@@ -399,8 +423,8 @@ impl<M: CellModel> Rank<M> {
             };
             self.received += msgs.len() as u64;
             for m in msgs {
-                match self.local.get(m.dst_world as usize).copied().flatten() {
-                    Some(i) => self.worlds[i].receive(m),
+                match local.get(m.dst_world as usize).copied().flatten() {
+                    Some(i) => got.push((i, m)),
                     None => self.fatal(&format!(
                         "a batch from rank {from} holds a message for world {}, which is not \
                          on this rank",
@@ -410,6 +434,7 @@ impl<M: CellModel> Rank<M> {
             }
         }
         self.reclaim();
+        got
     }
 
     /// The local world to act next: one with messages first, then the smallest LVT.
@@ -449,17 +474,80 @@ impl<M: CellModel> Rank<M> {
         }
     }
 
+    /// Up to `round_actions` actions of this rank's worlds (fewer if none can act), receiving
+    /// and sending batches between them: on one thread, or on `threads` when the rank has
+    /// several worlds.
+    fn work(&mut self) {
+        if self.threads > 1 && self.worlds.len() > 1 {
+            self.work_on_threads();
+            return;
+        }
+        for _ in 0..self.round_actions {
+            self.poll();
+            let Some(i) = self.pick() else { break };
+            self.act(i);
+            self.flush();
+        }
+    }
+
+    /// [`Self::work`] on `threads` threads ([`parallel`](super::parallel)): the main thread
+    /// takes turns like the helpers and, between its turns, receives and sends the batches.
+    fn work_on_threads(&mut self) {
+        let local = std::mem::take(&mut self.local);
+        let owner = std::mem::take(&mut self.owner);
+        let pool = Pool::new(
+            std::mem::take(&mut self.worlds),
+            std::mem::take(&mut self.meters),
+            &local,
+            &owner,
+            self.ranks,
+            self.gvt,
+            self.round_actions,
+            self.planted,
+            self.me,
+        );
+        let helpers = (self.threads - 1).min(pool.len() - 1);
+        std::thread::scope(|scope| {
+            for _ in 0..helpers {
+                scope.spawn(|| pool.help());
+            }
+            loop {
+                for (i, m) in self.receive_batches(&local) {
+                    pool.deliver(i, m);
+                }
+                self.send(pool.take_outbox());
+                match pool.turn() {
+                    Turn::Acted => {}
+                    Turn::Wait => std::thread::yield_now(),
+                    Turn::Done => break,
+                }
+            }
+        });
+        self.send(pool.take_outbox());
+        let end = pool.finish();
+        self.local = local;
+        self.owner = owner;
+        self.worlds = end.worlds;
+        self.meters = end.meters;
+        if let Some(failure) = end.failure {
+            self.fatal(&failure);
+        }
+    }
+
+    /// Queues messages for other ranks (`by_rank[r]` for rank `r`) and sends them.
+    fn send(&mut self, by_rank: Vec<Vec<Message<M::State>>>) {
+        for (dest, msgs) in by_rank.into_iter().enumerate() {
+            self.outbox[dest].extend(msgs);
+        }
+        self.flush();
+    }
+
     /// The run: work, GVT round, commit, until the last step is committed or rank 0's sink
     /// stops the run.
     fn run(&mut self, wanted: &StatesWanted, sink: &mut Sink<'_, M::State, M::Event>) {
         while self.committed < self.target && !self.stopped {
             self.balance_if_due();
-            for _ in 0..self.round_actions {
-                self.poll();
-                let Some(i) = self.pick() else { break };
-                self.act(i);
-                self.flush();
-            }
+            self.work();
             let new = self.gvt_round();
             if new > self.gvt {
                 self.gvt = new;
