@@ -846,6 +846,40 @@ fn every_quick_experiment_writes_a_csv_and_a_chart_that_decodes() {
 }
 
 #[test]
+fn the_cluster_model_writes_one_row_per_size_rank_count_network_and_commit_labelled_a_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let printed = ok(&["experiment", "cluster-model", "--quick", "--out", out]);
+    assert!(printed.contains("MODEL (not a measurement)"), "{printed}");
+    let csv = std::fs::read_to_string(dir.path().join("cluster-model.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    let header: Vec<&str> = lines[0].split(',').collect();
+    // Quick: 3 scene sizes × 3 rank counts × 2 networks × 2 commits.
+    assert_eq!(lines.len(), 1 + 3 * 3 * 2 * 2, "{csv}");
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (seq, flow, cluster) = (
+        col("sequential_seconds"),
+        col("dataflow_seconds"),
+        col("cluster_seconds"),
+    );
+    for l in &lines[1..] {
+        let v: Vec<&str> = l.split(',').collect();
+        assert_eq!(v.len(), header.len(), "{l}");
+        let num = |k: usize| v[k].parse::<f64>().unwrap();
+        // Messages, rounds and commits only add time to the free dataflow schedule, which
+        // is never slower than sequential.
+        assert!(
+            num(seq) > 0.0 && num(flow) <= num(seq) * (1.0 + 1e-9),
+            "{l}"
+        );
+        assert!(num(cluster) >= num(flow), "{l}");
+    }
+    let svg = std::fs::read_to_string(dir.path().join("cluster-model.svg")).unwrap();
+    let tree = usvg::Tree::from_str(&svg, &usvg::Options::default()).unwrap();
+    assert!(tree.root().has_children());
+}
+
+#[test]
 fn experiment_runs_commit_the_reference_hash() {
     let dir = tempfile::tempdir().unwrap();
     ok(&[

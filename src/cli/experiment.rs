@@ -3,6 +3,7 @@
 //! counter, plus the experiment's own columns) and `DIR/NAME.svg` (a chart), with a progress
 //! bar. `--quick` runs a small version in well under a minute (used by the tests).
 
+mod cluster;
 mod peak;
 mod peak_display;
 
@@ -29,7 +30,8 @@ Examples:
   soda experiment sync-share
   soda experiment peak-resistance --out results  also peak-resistance-gaps.svg and -cost.csv/.svg
   soda experiment raw-performance
-  soda experiment peak-display --quick           the peak with a display draining the buffer";
+  soda experiment peak-display --quick           the peak with a display draining the buffer
+  soda experiment cluster-model                  a MODEL of 16-256 MPI ranks on a cluster";
 
 /// The experiments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -56,6 +58,10 @@ pub enum ExperimentName {
     /// frames drained at 24 and 60 frames per second from a buffer of B frames (filled
     /// before playing); per window and buffer, whether the display starves during the peak.
     PeakDisplay,
+    /// A MODEL of the MPI executor on 16, 64 and 256 ranks of a cluster (InfiniBand and
+    /// 10 GbE), from cell costs, occupancy and wire costs measured here on falling-cubes at
+    /// several sizes: predicted speed-up, bytes per step, and the size from which it pays.
+    ClusterModel,
 }
 
 impl ExperimentName {
@@ -67,6 +73,7 @@ impl ExperimentName {
             Self::RpEfficiency => "rp-efficiency",
             Self::PeakResistance => "peak-resistance",
             Self::PeakDisplay => "peak-display",
+            Self::ClusterModel => "cluster-model",
         }
     }
 }
@@ -105,6 +112,8 @@ pub fn experiment(args: &ExperimentArgs) -> Result<()> {
         ExperimentName::RpEfficiency => rp_efficiency(args.quick, &svg)?,
         ExperimentName::PeakResistance => peak::peak_resistance(args.quick, &svg)?,
         ExperimentName::PeakDisplay => peak_display::peak_display(args.quick, &svg)?,
+        // A model, not runs: it writes its own table.
+        ExperimentName::ClusterModel => return cluster::cluster_model(args.quick, &csv, &svg),
     };
     write_csv(&csv, &rows)?;
     println!("wrote {}", csv.display());

@@ -15,6 +15,8 @@
 //! [`WindowedRun`] models N worlds on fewer workers with ideal optimism and a window W (the
 //! `peak-resistance` experiment): what the window could absorb if worlds ran ahead.
 
+pub mod cluster;
+
 use crate::exec::reference::CellCost;
 use crate::grid::Grid;
 use crate::kernel::Partition;
