@@ -42,6 +42,30 @@ fn conservative_never_rolls_back() {
 }
 
 #[test]
+fn an_adaptive_window_commits_the_reference_bits_and_wastes_less_than_its_ceiling() {
+    let s = builtin("falling-cubes", Some(200), 2).unwrap();
+    let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());
+    let exp = reference(&m, &g, &b, 80);
+    let (mut auto_waste, mut fixed_waste) = (0, 0);
+    for mode in [RollbackMode::Cell, RollbackMode::World] {
+        for seed in 0..3 {
+            let cfg = KernelConfig::new(6).mode(mode).window(64);
+            let options = VirtualOptions::seeded(seed);
+            let auto = compare(&m, &g, &b, &cfg.clone().window_auto(true), &options, &exp)
+                .unwrap_or_else(|e| panic!("{mode:?} seed {seed}: {e}"));
+            let fixed = compare(&m, &g, &b, &cfg, &options, &exp).unwrap();
+            auto_waste += auto.total.steps_rolled_back;
+            fixed_waste += fixed.total.steps_rolled_back;
+        }
+    }
+    assert!(fixed_waste > 0, "the schedules produced rollbacks");
+    assert!(
+        auto_waste < fixed_waste,
+        "the adaptive window rolled back {auto_waste} steps, its fixed ceiling {fixed_waste}"
+    );
+}
+
+#[test]
 fn cell_recomputes_fewer_cell_steps_than_world_on_the_same_schedules_of_sparse_gas() {
     let s = builtin("sparse-gas", Some(64), 1).unwrap();
     let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());

@@ -67,9 +67,10 @@ pub struct KernelArgs {
     /// Worlds.
     #[arg(long, value_name = "N", default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..=4096))]
     pub worlds: u64,
-    /// Optimism window.
-    #[arg(long, value_name = "W", default_value_t = 16, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
-    pub window: u64,
+    /// Optimism window: W steps, or `auto` (`auto:W`): each world adapts its own up to 64 (W)
+    /// by its rollbacks.
+    #[arg(long, value_name = "W", default_value = "16")]
+    pub window: crate::kernel::WindowSpec,
     /// Partitioner: blocks, kmeans or random.
     #[arg(long, value_name = "P", default_value = "blocks")]
     pub partition: String,
@@ -83,8 +84,9 @@ impl KernelArgs {
                 self.partition
             )
         })?;
-        Ok(KernelConfig::new(self.worlds as usize)
-            .window(self.window)
+        Ok(self
+            .window
+            .apply(KernelConfig::new(self.worlds as usize))
             .partition(partition))
     }
 }

@@ -6,7 +6,7 @@ use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use soda::exec::virtual_exec::{parse_schedule, ScheduleSpec};
 use soda::kernel::{
-    BalanceConfig, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode,
+    BalanceConfig, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode, WindowSpec,
 };
 use soda::sim::{ExecutorKind, RunOptions};
 
@@ -103,10 +103,10 @@ pub struct ExecutorArgs {
     /// Rollback mode [default: cell]. Virtual and threaded only.
     #[arg(long, value_enum, value_name = "MODE")]
     pub mode: Option<ModeArg>,
-    /// Optimism window: no world computes past GVT + W [default: 16]. Virtual and threaded
-    /// only.
-    #[arg(long, value_name = "W", value_parser = whole(1, 1_000_000))]
-    pub window: Option<u64>,
+    /// Optimism window: no world computes past GVT + W [default: 16]; `auto`: each world
+    /// adapts its own window up to 64 by its recent rollbacks (`auto:W` up to W).
+    #[arg(long, value_name = "W", value_parser = clap::value_parser!(WindowSpec))]
+    pub window: Option<WindowSpec>,
     /// How cells are assigned to worlds [default: blocks]. Virtual and threaded only.
     #[arg(long, value_enum, value_name = "KIND")]
     pub partition: Option<PartitionArg>,
@@ -299,10 +299,13 @@ impl ExecutorArgs {
         };
         let mut kernel = KernelConfig::new(self.worlds.map_or(default_worlds, |w| w as usize))
             .mode(self.mode.map_or(RollbackMode::Cell, Into::into))
-            .window(self.window.unwrap_or(16))
+            .window(16)
             .partition(partition)
             .partition_seed(self.partition_seed.unwrap_or(0))
             .ghosts(self.ghosts.map_or(GhostPolicy::Delta, Into::into));
+        if let Some(w) = self.window {
+            kernel = w.apply(kernel);
+        }
         kernel.planted_bug = self.planted_bug.map_or(PlantedBug::None, Into::into);
         kernel.balance = self.balance_config()?;
         Ok(RunOptions {

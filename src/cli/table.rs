@@ -21,7 +21,16 @@ pub fn run_row(report: &RunReport, bodies: usize) -> Vec<(String, String)> {
         "mode",
         k.map_or("none".into(), |k| k.mode.name().to_string()),
     );
-    put("window", k.map_or(0, |k| k.window).to_string());
+    put(
+        "window",
+        k.map_or("0".into(), |k| {
+            if k.window_auto {
+                soda::kernel::WindowSpec::Auto(k.window).to_string()
+            } else {
+                k.window.to_string()
+            }
+        }),
+    );
     put(
         "partition",
         k.map_or("none".into(), |k| k.partition.name().to_string()),

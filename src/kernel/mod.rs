@@ -31,6 +31,7 @@ pub mod world;
 pub use balance::{Balancer, LoadLevel, RoundRecord};
 pub use config::{
     BalanceConfig, GhostPolicy, KernelConfig, LoadSource, PartitionKind, PlantedBug, RollbackMode,
+    WindowSpec,
 };
 pub use counters::{BalanceCounters, Counters, WorldCounters};
 pub use message::{Edit, EntityEdit, Homed, Input, Message, MessageKey, MessageKind, Sign};

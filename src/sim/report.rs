@@ -47,8 +47,10 @@ pub struct KernelReport {
     pub threads: usize,
     /// Rollback mode.
     pub mode: crate::kernel::RollbackMode,
-    /// Optimism window.
+    /// Optimism window (the ceiling of an adaptive one).
     pub window: u64,
+    /// Whether each world adapted its window by its rollbacks (`--window auto`).
+    pub window_auto: bool,
     /// Partitioner.
     pub partition: crate::kernel::PartitionKind,
     /// The virtual executor's schedule as a replay string (`None` for threaded runs, which

@@ -409,6 +409,7 @@ fn kernel_report(
         threads,
         mode: options.kernel.mode,
         window: options.kernel.window,
+        window_auto: options.kernel.window_auto,
         partition: options.kernel.partition.clone(),
         schedule,
         efficiency: counters.total.efficiency(),

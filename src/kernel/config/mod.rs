@@ -6,9 +6,11 @@
 
 mod balance;
 mod names;
+mod window;
 
 pub use balance::{BalanceConfig, BalanceConfigError, LoadSource, MAX_BACKOFF};
 pub use names::{UnknownGhostPolicy, UnknownMode, UnknownPartition};
+pub use window::WindowSpec;
 
 use serde::{Deserialize, Serialize};
 
@@ -86,6 +88,12 @@ pub struct KernelConfig {
     /// Optimism window `W` ≥ 1: after computing a step, a world holds at most `W`
     /// uncommitted states (no world computes past GVT + W − 1).
     pub window: u64,
+    /// Adaptive optimism (SPEC.md §K14): each world throttles its own window within
+    /// `1..=window` by its recent rollbacks (halved at a rollback, one wider at each GVT
+    /// advance it saw without one). Off: every world uses `window`. Only how far worlds
+    /// speculate changes, never the committed bits.
+    #[serde(default)]
+    pub window_auto: bool,
     /// Partitioner.
     pub partition: PartitionKind,
     /// Seed of the k-means and random partitioners.
@@ -114,6 +122,7 @@ impl Default for KernelConfig {
             worlds: 4,
             mode: RollbackMode::Cell,
             window: 16,
+            window_auto: false,
             partition: PartitionKind::Blocks,
             partition_seed: 0,
             trace: false,
@@ -142,6 +151,12 @@ impl KernelConfig {
     /// Sets the optimism window.
     pub fn window(mut self, window: u64) -> Self {
         self.window = window;
+        self
+    }
+
+    /// Makes the window adaptive, with `window` as its ceiling (SPEC.md §K14).
+    pub fn window_auto(mut self, on: bool) -> Self {
+        self.window_auto = on;
         self
     }
 

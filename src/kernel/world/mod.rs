@@ -27,10 +27,12 @@ mod receive;
 mod recompute;
 mod send;
 mod territory;
+mod throttle;
 
 use self::index::{OwnCell, PerOwnCell};
 use self::log::Slot;
 use self::territory::Nb;
+use self::throttle::Throttle;
 use super::config::{GhostPolicy, KernelConfig, PlantedBug, RollbackMode};
 use super::counters::WorldCounters;
 use super::message::{Message, MessageKey, MessageKind};
@@ -65,8 +67,11 @@ pub struct World<M: CellModel> {
     part: Arc<Partition>,
     /// Its rollback mode (or conservative).
     mode: RollbackMode,
-    /// The window: it computes a step `s` only when `s + 1 < GVT + window`.
+    /// The window: it computes a step `s` only when `s + 1 < GVT + window`. Adaptive
+    /// (`throttle`), it moves within `1..=` the configured window.
     window: Step,
+    /// The adaptive window's state, if the window adapts (SPEC.md §K14).
+    throttle: Option<Throttle>,
     /// The planted bug it runs with (verification only).
     bug: PlantedBug,
     /// Full or delta ghosts (optimistic modes).
@@ -152,7 +157,8 @@ impl<M: CellModel> World<M> {
     pub fn reterritory(&mut self, part: Arc<Partition>, states: &CellStates<M::State>, step: Step) {
         let config = KernelConfig {
             mode: self.mode,
-            window: self.window,
+            window: self.throttle.as_ref().map_or(self.window, |t| t.ceiling),
+            window_auto: self.throttle.is_some(),
             planted_bug: self.bug,
             ghosts: self.ghosts,
             ..KernelConfig::default()
@@ -362,6 +368,10 @@ impl<M: CellModel> World<M> {
     /// separate actions, so a schedule can let every world apply its news before anyone
     /// computes.)
     pub fn act(&mut self, gvt: Step) -> Vec<Message<M::State>> {
+        if let Some(t) = &mut self.throttle {
+            let c = &self.counters;
+            self.window = t.on_gvt(gvt, self.window, c.steps_computed, c.steps_rolled_back);
+        }
         let mut out = Vec::new();
         if self.mode == RollbackMode::Conservative {
             self.act_conservative(gvt, &mut out);

@@ -3,6 +3,7 @@
 
 use super::index::{cells_around, MarginCell, OwnCell, PerOwnCell};
 use super::log::{share, Slot};
+use super::throttle::Throttle;
 use super::World;
 use crate::grid::Grid;
 use crate::kernel::config::KernelConfig;
@@ -91,7 +92,8 @@ impl<M: CellModel> World<M> {
             grid,
             part,
             mode: config.mode,
-            window: config.window.max(1),
+            window: Throttle::initial_window(config),
+            throttle: Throttle::of(config),
             bug: config.planted_bug,
             ghosts: config.ghosts,
             cells,
