@@ -211,53 +211,107 @@ impl<S: Clone, E: Clone> Slot<S, E> {
         }
     }
 
-    /// Bytes this slot holds. A ghost view shared with the slot before (`prev`, the same
-    /// `Arc`) is counted there only; inputs count their states and removed ids.
-    pub(super) fn bytes(&self, prev: Option<&Slot<S, E>>) -> usize {
+    /// Bytes this slot holds, by part. A ghost view shared with the slot before (`prev`, the
+    /// same `Arc`) is counted there only; inputs count their states and removed ids.
+    pub(super) fn bytes(&self, prev: Option<&Slot<S, E>>) -> LogBytes {
         let s = std::mem::size_of::<S>();
         let p = std::mem::size_of::<Homed<S>>();
         let v = std::mem::size_of::<Vec<S>>();
         let h = std::mem::size_of::<Shared<S>>();
-        let mut b = self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1);
+        let mut b = LogBytes {
+            slots: (self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1)
+                + self.ghosts.len() * std::mem::size_of::<Option<Arc<Vec<S>>>>()
+                + (self.ghost_known.len() + self.migrate_known.len()) * 8) as u64,
+            ..LogBytes::default()
+        };
         // A cell's states shared by its output and the next step's state count half at each.
         let held = |a: &Arc<[S]>| (16 + a.len() * s) / Arc::strong_count(a);
-        b += self.states.iter().flatten().map(held).sum::<usize>();
+        b.states += self.states.iter().flatten().map(held).sum::<usize>() as u64;
         for o in self.outs.iter().flatten() {
-            b += o.bodies.as_ref().map_or(0, held)
+            b.outputs += (o.bodies.as_ref().map_or(0, held)
                 + o.homes.len() * 4
-                + o.events.len() * std::mem::size_of::<Event<E>>();
+                + o.events.len() * std::mem::size_of::<Event<E>>()) as u64;
         }
-        b += self.ghosts.len() * std::mem::size_of::<Option<Arc<Vec<S>>>>();
         for (k, g) in self.ghosts.iter().enumerate() {
             let Some(g) = g else { continue };
             let shared = prev
                 .and_then(|p| p.ghosts[k].as_ref())
                 .is_some_and(|h| Arc::ptr_eq(g, h));
-            b += if shared { 0 } else { 16 + v + g.len() * s };
+            b.ghosts += if shared { 0 } else { 16 + v + g.len() * s } as u64;
         }
         for input in self.inputs.values() {
-            b += 8 + input.edits.len() * 16 + input.removes.len() * 8 + input.adds.len() * p;
+            b.inputs += (8 + input.edits.len() * 16 + input.removes.len() * 8 + input.adds.len() * p)
+                as u64;
         }
-        b += self
+        b.migrations += self
             .foreign_in
             .values()
             .map(|g| v + 8 + g.len() * s)
-            .sum::<usize>();
+            .sum::<usize>() as u64;
         // Message bodies are shared between the sender's log, the messages and the
         // receivers' logs: each holder counts its share.
         let share = |l: &Bodies<S>| (v + l.len() * p) / Arc::strong_count(l);
         for r in self.recv.values() {
-            b += 16 + r.antis.len() * 4;
-            b += r
+            b.received += (16 + r.antis.len() * 4) as u64;
+            b.received += r
                 .positives
                 .iter()
                 .map(|x| 8 + share(&x.bodies))
-                .sum::<usize>();
+                .sum::<usize>() as u64;
         }
         for x in self.sent.values() {
-            b += 24 + x.live.as_ref().map_or(0, share);
+            b.sent += (24 + x.live.as_ref().map_or(0, share)) as u64;
         }
-        b + (self.ghost_known.len() + self.migrate_known.len()) * 8
+        b
+    }
+}
+
+/// Bytes held by logs, by part (SPEC.md §K9: how they are counted). [`LogBytes::total`] is
+/// what `peak_log_bytes` samples.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LogBytes {
+    /// Own cells' states (the per-cell checkpoint log).
+    pub states: u64,
+    /// Own cells' outputs: bodies, home cells and events.
+    pub outputs: u64,
+    /// Views of margin cells (ghosts received).
+    pub ghosts: u64,
+    /// Bodies migrating in from foreign cells.
+    pub migrations: u64,
+    /// Inputs applied.
+    pub inputs: u64,
+    /// Messages received (versions and early anti-messages).
+    pub received: u64,
+    /// The log of what was sent.
+    pub sent: u64,
+    /// Fixed per slot: per-cell headers and the sets of known cells.
+    pub slots: u64,
+}
+
+impl LogBytes {
+    /// The sum of every part.
+    pub fn total(&self) -> u64 {
+        self.states
+            + self.outputs
+            + self.ghosts
+            + self.migrations
+            + self.inputs
+            + self.received
+            + self.sent
+            + self.slots
+    }
+}
+
+impl std::ops::AddAssign for LogBytes {
+    fn add_assign(&mut self, o: LogBytes) {
+        self.states += o.states;
+        self.outputs += o.outputs;
+        self.ghosts += o.ghosts;
+        self.migrations += o.migrations;
+        self.inputs += o.inputs;
+        self.received += o.received;
+        self.sent += o.sent;
+        self.slots += o.slots;
     }
 }
 
@@ -314,13 +368,18 @@ impl<M: CellModel> World<M> {
 
     /// Bytes held by the logs now.
     pub fn log_bytes(&self) -> u64 {
+        self.log_breakdown().total()
+    }
+
+    /// Bytes held by the logs now, by part.
+    pub fn log_breakdown(&self) -> LogBytes {
         let mut prev = None;
-        let mut b = 0;
+        let mut b = LogBytes::default();
         for s in &self.slots {
             b += s.bytes(prev);
             prev = Some(s);
         }
-        b as u64
+        b
     }
 
     /// Number of steps the logs hold now.

@@ -29,6 +29,7 @@ mod send;
 mod territory;
 
 use self::index::{OwnCell, PerOwnCell};
+pub use self::log::LogBytes;
 use self::log::Slot;
 use self::territory::Nb;
 use super::config::{GhostPolicy, KernelConfig, PlantedBug, RollbackMode};
