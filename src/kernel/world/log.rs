@@ -61,8 +61,8 @@ impl<S, E> Out<S, E> {
         events: Vec<Event<E>>,
         computed: bool,
     ) -> Self {
-        let rare = (!homes.is_empty() || !events.is_empty())
-            .then(|| Box::new(Rare { homes, events }));
+        let rare =
+            (!homes.is_empty() || !events.is_empty()).then(|| Box::new(Rare { homes, events }));
         Out {
             cell,
             computed,
@@ -143,8 +143,8 @@ pub(super) enum Carried<S> {
     /// A migration's bodies with their home cells.
     Bodies(Bodies<S>),
     /// A ghost, as the view of its cell (`None`: empty) that the slots take — shared, not
-    /// copied — while it is effective.
-    View(Option<Arc<Vec<S>>>),
+    /// copied — while it is effective; within a process, the sender's logged state itself.
+    View(Shared<S>),
 }
 
 impl<S> Version<S> {
@@ -214,8 +214,9 @@ pub(super) struct Slot<S, E> {
     pub(super) known: PerOwnCell<bool>,
     /// The view of each margin cell (indexed by [`MarginCell`]) at this step (K4: the
     /// effective ghost of the step, else — optimistic modes — the view of the step before;
-    /// `None`: empty). Shared, not copied, between the steps that inherit it.
-    pub(super) ghosts: Vec<Option<Arc<Vec<S>>>>,
+    /// `None`: empty). Shared, not copied, between the steps that inherit it, and (within a
+    /// process) with the sender's log.
+    pub(super) ghosts: Vec<Shared<S>>,
     /// Conservative mode: the foreign cells (global) whose ghost of this step has arrived.
     pub(super) ghost_known: BTreeSet<u32>,
     /// The bodies migrating in at this step, by own destination cell and foreign source
@@ -263,7 +264,7 @@ impl<S: Clone, E: Clone> Slot<S, E> {
 
     /// The view of margin cell `m` (empty if none).
     pub(super) fn ghost(&self, m: MarginCell) -> &[S] {
-        self.ghosts[m.index()].as_ref().map_or(&[][..], |v| &v[..])
+        view(&self.ghosts[m.index()])
     }
 
     /// An empty slot for `own` own cells and `margin` margin cells.
@@ -282,37 +283,33 @@ impl<S: Clone, E: Clone> Slot<S, E> {
         }
     }
 
-    /// Bytes this slot holds, by part. A ghost view shared with the slot before (`prev`, the
-    /// same `Arc`) is counted there only; inputs count their states and removed ids.
-    /// `margin` is the world's margin cells (a received ghost's view that is this slot's
-    /// view of its cell is counted there).
-    pub(super) fn bytes(&self, prev: Option<&Slot<S, E>>, margin: &[u32]) -> LogBytes {
+    /// Bytes this slot holds, by part. An allocation of states shared by several holders
+    /// (a cell's state, its output, the next step's state, the sent log, the views of the
+    /// steps that inherit them, received versions) counts `1/n` at each of its `n` holders;
+    /// inputs count their states and removed ids.
+    pub(super) fn bytes(&self) -> LogBytes {
         let s = std::mem::size_of::<S>();
         let p = std::mem::size_of::<Homed<S>>();
         let v = std::mem::size_of::<Vec<S>>();
         let h = std::mem::size_of::<Shared<S>>();
         let mut b = LogBytes {
             slots: (self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1)
-                + self.ghosts.len() * std::mem::size_of::<Option<Arc<Vec<S>>>>()
-                + (self.ghost_known.len() + self.migrate_known.len()) * 8) as u64,
+                + self.ghosts.len() * h
+                + (self.ghost_known.len() + self.migrate_known.len()) * 8)
+                as u64,
             ..LogBytes::default()
         };
-        // A cell's states shared by its output and the next step's state count half at each.
+        // Each holder of a shared allocation counts its share.
         let held = |a: &Arc<[S]>| (16 + a.len() * s) / Arc::strong_count(a);
         b.states += self.states.iter().flatten().map(held).sum::<usize>() as u64;
         for o in self.outs.iter().flatten() {
             b.outputs += (o.bodies.as_ref().map_or(0, held) + o.rare_bytes()) as u64;
         }
-        for (k, g) in self.ghosts.iter().enumerate() {
-            let Some(g) = g else { continue };
-            let shared = prev
-                .and_then(|p| p.ghosts[k].as_ref())
-                .is_some_and(|h| Arc::ptr_eq(g, h));
-            b.ghosts += if shared { 0 } else { 16 + v + g.len() * s } as u64;
-        }
+        b.ghosts += self.ghosts.iter().flatten().map(held).sum::<usize>() as u64;
         for input in self.inputs.values() {
-            b.inputs += (8 + input.edits.len() * 16 + input.removes.len() * 8 + input.adds.len() * p)
-                as u64;
+            b.inputs +=
+                (8 + input.edits.len() * 16 + input.removes.len() * 8 + input.adds.len() * p)
+                    as u64;
         }
         b.migrations += self
             .foreign_in
@@ -322,28 +319,22 @@ impl<S: Clone, E: Clone> Slot<S, E> {
         // Message bodies are shared between the sender's log, the messages and the
         // receivers' logs: each holder counts its share.
         let share = |l: &Bodies<S>| (v + l.len() * p) / Arc::strong_count(l);
-        for (key, r) in &self.recv {
+        for r in self.recv.values() {
             b.received += (16 + r.antis.len() * 4) as u64;
-            let current = margin
-                .binary_search(&key.src_cell)
-                .ok()
-                .and_then(|m| self.ghosts[m].as_ref());
             for x in &r.positives {
                 b.received += 8 + match &x.content {
                     Carried::Bodies(l) => share(l),
-                    Carried::View(None) => 0,
-                    // Counted with the slot's views when it is this step's view.
-                    Carried::View(Some(g)) if current.is_some_and(|c| Arc::ptr_eq(c, g)) => 0,
-                    Carried::View(Some(g)) => 16 + v + g.len() * s,
+                    Carried::View(g) => g.as_ref().map_or(0, held),
                 } as u64;
             }
         }
         for x in self.sent.values() {
-            b.sent += 24 + match &x.live {
-                None => 0,
-                Some(Live::Bodies(l)) => share(l),
-                Some(Live::State(st)) => st.as_ref().map_or(0, held),
-            } as u64;
+            b.sent += 24
+                + match &x.live {
+                    None => 0,
+                    Some(Live::Bodies(l)) => share(l),
+                    Some(Live::State(st)) => st.as_ref().map_or(0, held),
+                } as u64;
         }
         b
     }
@@ -456,11 +447,9 @@ impl<M: CellModel> World<M> {
 
     /// Bytes held by the logs now, by part.
     pub fn log_breakdown(&self) -> LogBytes {
-        let mut prev = None;
         let mut b = LogBytes::default();
         for s in &self.slots {
-            b += s.bytes(prev, &self.margin);
-            prev = Some(s);
+            b += s.bytes();
         }
         b
     }

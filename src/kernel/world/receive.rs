@@ -3,7 +3,7 @@
 
 use super::index::OwnCell;
 use super::keys::{MigrationIn, RecvKey};
-use super::log::{view, Carried, Version};
+use super::log::{view, Carried, Shared, Version};
 use super::World;
 use crate::kernel::config::RollbackMode;
 use crate::kernel::message::{Bodies, Message, MessageKind, Sign};
@@ -81,22 +81,16 @@ impl<M: CellModel> World<M> {
                 } else {
                     // A ghost is kept as the view it gives (the message's copy is dropped:
                     // moved out when this world holds its only reference).
+                    let (seq, follows) = (msg.seq, msg.follows);
                     let content = if kind == MessageKind::Ghost {
-                        Carried::View((!msg.bodies.is_empty()).then(|| {
-                            Arc::new(
-                                Arc::unwrap_or_clone(msg.bodies)
-                                    .into_iter()
-                                    .map(|h| h.state)
-                                    .collect(),
-                            )
-                        }))
+                        Carried::View(Self::ghost_view(msg))
                     } else {
                         Carried::Bodies(msg.bodies)
                     };
                     r.positives.push(Version {
-                        seq: msg.seq,
+                        seq,
                         content,
-                        follows: msg.follows,
+                        follows,
                     });
                 }
             }
@@ -189,6 +183,23 @@ impl<M: CellModel> World<M> {
         }
     }
 
+    /// The view a ghost gives (`None`: empty): the sender's state itself when the message
+    /// carries it (within a process), else its bodies' states.
+    pub(super) fn ghost_view(msg: Message<M::State>) -> Shared<M::State> {
+        if msg.bodies.is_empty() {
+            return None;
+        }
+        match msg.view {
+            Some(v) if v.len() == msg.bodies.len() => Some(v),
+            _ => Some(
+                Arc::unwrap_or_clone(msg.bodies)
+                    .into_iter()
+                    .map(|h| h.state)
+                    .collect(),
+            ),
+        }
+    }
+
     /// Sets the view of foreign cell `src` at `t` to `view` (`None`: empty) and, with delta
     /// ghosts, carries it forward to the later steps that inherit it (up to the next step
     /// with an effective ghost of its own) — unless the ghost `follows` (a ghost of `t + 1`
@@ -199,7 +210,7 @@ impl<M: CellModel> World<M> {
         &mut self,
         src: u32,
         t: Step,
-        view: Option<Arc<Vec<M::State>>>,
+        view: Shared<M::State>,
         follows: bool,
     ) -> Option<Step> {
         let carry = self.delta() && !follows;

@@ -53,7 +53,7 @@ impl<M: CellModel> World<M> {
         });
         let me = self.id;
         let bug = self.bug;
-        let msg = |sign, seq, bodies| Message {
+        let msg = |sign, seq, bodies, view| Message {
             edits: Vec::new(),
             step,
             kind,
@@ -65,11 +65,12 @@ impl<M: CellModel> World<M> {
             bodies,
             removes: Vec::new(),
             follows: sign == Sign::Positive && follows,
+            view,
         };
         if entry.live.take().is_some() {
             let dropped = bug == PlantedBug::DropLoneAnti && content.is_none();
             if !conservative && !dropped {
-                out.push(msg(Sign::Anti, entry.seq, Bodies::default()));
+                out.push(msg(Sign::Anti, entry.seq, Bodies::default(), None));
                 self.counters.anti_messages_sent += 1;
             }
         }
@@ -78,16 +79,20 @@ impl<M: CellModel> World<M> {
             entry.follows = follows;
             // A ghost's message carries a copy of the state with its cell; the log keeps the
             // state itself (shared with the cell's log).
-            let bodies: Bodies<M::State> = match &content {
-                Live::Bodies(b) => b.clone(),
-                Live::State(st) => Arc::new(
-                    view(st)
-                        .iter()
-                        .map(|b| Homed {
-                            cell,
-                            state: b.clone(),
-                        })
-                        .collect(),
+            // (and, within a process, the state itself for the receiver's view).
+            let (bodies, shared): (Bodies<M::State>, _) = match &content {
+                Live::Bodies(b) => (b.clone(), None),
+                Live::State(st) => (
+                    Arc::new(
+                        view(st)
+                            .iter()
+                            .map(|b| Homed {
+                                cell,
+                                state: b.clone(),
+                            })
+                            .collect(),
+                    ),
+                    st.clone(),
                 ),
             };
             entry.live = Some(content);
@@ -97,7 +102,7 @@ impl<M: CellModel> World<M> {
             if conservative && content.is_empty() {
                 self.counters.null_messages_sent += 1;
             }
-            out.push(msg(Sign::Positive, entry.seq, content));
+            out.push(msg(Sign::Positive, entry.seq, content, shared));
             self.counters.messages_sent += 1;
             match kind {
                 MessageKind::Ghost => self.counters.ghosts_sent += 1,
