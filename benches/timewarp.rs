@@ -12,7 +12,9 @@
 //!    same seeded schedule for `cell`, `world` and `conservative`: cell computations,
 //!    re-executions, rollbacks, efficiency and wall time.
 //! 3. **Log memory** at window 64: `falling-cubes`, 8 worlds, `cell`, seeded schedule; bytes
-//!    held by the logs sampled along the run, bytes per body-step held.
+//!    held by the logs sampled along the run, bytes per body-step held, and by part (states,
+//!    outputs, ghost views, migrations in, inputs, messages received and sent, per-slot
+//!    headers).
 //!
 //! 4. **Log flatness** over 10,000 steps at window 64: synthetic particles (`TW_PARTICLES`,
 //!    default 2000; `TW_FLAT_STEPS`, default 10000), logs sampled every tenth of the run.
@@ -218,7 +220,10 @@ fn log_memory() {
         &cfg,
         &options(ScheduleSpec::Seeded(5)),
     );
-    println!("log memory: falling-cubes {cubes}, 8 worlds, cell, W64, seeded(5)");
+    println!(
+        "log memory: falling-cubes {cubes}, 8 worlds, cell, W64, seeded(5); a body's state is {} B",
+        std::mem::size_of::<soda::physics::Body>()
+    );
     r.set_horizon(steps + 64);
     let chunk = (steps / 8).max(1);
     let mut done = 0;
@@ -235,6 +240,19 @@ fn log_memory() {
             bytes as f64 / (cubes as f64 * held as f64 / 8.0),
             held as f64 / 8.0,
             r.gvt()
+        );
+        let b = r.log_breakdown();
+        let per = |x: u64| x as f64 / (cubes as f64 * held as f64 / 8.0);
+        println!(
+            "    B per body-step: states {:.1}, outputs {:.1}, ghosts {:.1}, migrations {:.1}, inputs {:.1}, received {:.1}, sent {:.1}, slots {:.1}",
+            per(b.states),
+            per(b.outputs),
+            per(b.ghosts),
+            per(b.migrations),
+            per(b.inputs),
+            per(b.received),
+            per(b.sent),
+            per(b.slots)
         );
     }
     let c = r.counters();

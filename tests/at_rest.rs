@@ -138,3 +138,49 @@ fn asleep_and_woken_piles_commit_the_reference_frames_on_every_executor() {
         );
     }
 }
+
+/// The logs of an asleep pile hold each cell's state once, whatever the steps they hold
+/// (SPEC.md §K3): a cell whose output is bit-identical to its state logs that state's
+/// allocation, not a copy, so states and outputs together stay within one copy of the bodies
+/// (plus each cell's allocation header) over a full window of 64 steps.
+#[test]
+fn unchanged_cells_share_their_logged_states() {
+    let scene = pile();
+    let (mut reference, _) = ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
+    let cfg = KernelConfig::new(2).mode(RollbackMode::Cell).window(64);
+    let options = soda::exec::virtual_exec::VirtualOptions::new(
+        soda::exec::virtual_exec::ScheduleSpec::Seeded(5),
+    );
+    let (mut run, _) = soda::exec::virtual_exec::VirtualRun::new(
+        scene.model(),
+        scene.grid(),
+        scene.initial_bodies(),
+        &cfg,
+        &options,
+    );
+    let end = 260;
+    run.set_horizon(end + 64);
+    run.run(end);
+    for _ in 0..end - 64 {
+        reference.advance();
+    }
+    // Every step the logs can hold (GVT − 2 on) is asleep.
+    for _ in 0..64 {
+        assert!(
+            all_at_rest(&reference),
+            "the pile is awake at {}",
+            reference.step_number()
+        );
+        reference.advance();
+    }
+    let held = run.steps_held();
+    assert!(held >= 48, "the logs hold only {held} world-steps");
+    let b = run.log_breakdown();
+    let cells = reference.state().occupied().count() as u64;
+    let once = 27 * std::mem::size_of::<Body>() as u64 + 16 * cells;
+    assert!(
+        b.states + b.outputs <= once,
+        "{held} world-steps asleep hold {} B of states and outputs; one copy is {once} B",
+        b.states + b.outputs
+    );
+}

@@ -95,6 +95,7 @@ pub(crate) fn input_message<M: CellModel>(
         removes,
         edits,
         follows: false,
+        view: None,
     }
 }
 

@@ -80,7 +80,7 @@ impl MessageKey {
 }
 
 /// A timestamped message from one world to another.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Message<S> {
     /// The step of the states it describes.
     pub step: Step,
@@ -107,6 +107,28 @@ pub struct Message<S> {
     /// Delta ghosts (SPEC.md §K4): the sender's state of the cell at `step` differs from its
     /// state at `step − 1`, so a ghost of `step + 1` follows. False for everything else.
     pub follows: bool,
+    /// A non-empty ghost within one process: the sender's logged state of the cell — the
+    /// states of `bodies`, one shared allocation that the receiver keeps as its view instead
+    /// of a copy (SPEC.md §K3). `None` otherwise (and after crossing processes: the
+    /// receiver copies `bodies`). Not part of the message's identity or content: equality
+    /// ignores it.
+    pub view: Option<Arc<[S]>>,
+}
+
+impl<S: PartialEq> PartialEq for Message<S> {
+    fn eq(&self, o: &Self) -> bool {
+        self.step == o.step
+            && self.kind == o.kind
+            && self.sign == o.sign
+            && self.src_world == o.src_world
+            && self.dst_world == o.dst_world
+            && self.src_cell == o.src_cell
+            && self.seq == o.seq
+            && self.bodies == o.bodies
+            && self.removes == o.removes
+            && self.edits == o.edits
+            && self.follows == o.follows
+    }
 }
 
 /// A pure change of one entity's state — an impulse, a new velocity — applied at an input's

@@ -37,4 +37,4 @@ pub use counters::{BalanceCounters, Counters, WorldCounters};
 pub use message::{Edit, EntityEdit, Homed, Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
 pub use trace::{RunTrace, WorldTrace};
-pub use world::World;
+pub use world::{LogBytes, World};

@@ -265,6 +265,7 @@ pub fn decode_batch<S, E>(wire: &Wire<S, E>, words: &[u64]) -> Result<Vec<Messag
             removes: Vec::new(),
             edits: Vec::new(),
             follows,
+            view: None,
         });
     }
     r.finish()?;
@@ -449,6 +450,7 @@ mod tests {
             removes: Vec::new(),
             edits: Vec::new(),
             follows: false,
+            view: None,
         };
         let anti = Message {
             kind: MessageKind::Ghost,

@@ -357,6 +357,15 @@ impl<M: CellModel> VirtualRun<M> {
         self.worlds.iter().map(|w| w.log_bytes()).sum()
     }
 
+    /// Bytes held by all worlds' logs now, by part.
+    pub fn log_breakdown(&self) -> crate::kernel::LogBytes {
+        let mut b = crate::kernel::LogBytes::default();
+        for w in &self.worlds {
+            b += w.log_breakdown();
+        }
+        b
+    }
+
     /// Steps held by the logs now, summed over worlds.
     pub fn steps_held(&self) -> u64 {
         self.worlds.iter().map(|w| w.steps_held()).sum()

@@ -34,12 +34,8 @@ impl<M: CellModel> World<M> {
                     let slot = &mut self.slots[i];
                     slot.ghost_known.insert(src);
                     if !msg.bodies.is_empty() {
-                        let view = Arc::unwrap_or_clone(msg.bodies)
-                            .into_iter()
-                            .map(|h| h.state)
-                            .collect();
                         let m = self.margin_cell(src);
-                        self.slots[i].ghosts[m.index()] = Some(Arc::new(view));
+                        self.slots[i].ghosts[m.index()] = Self::ghost_view(msg);
                     } else {
                         // An empty cell at `step` migrates nothing at `step + 1`.
                         self.ensure_slot(step + 1);

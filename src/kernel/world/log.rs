@@ -27,42 +27,83 @@ pub(super) fn share<S>(v: Vec<S>) -> Shared<S> {
 }
 
 /// The output of one cell computation: the bodies it homes at the next step, sorted by
-/// (home cell, id), their home cells, and the events it raised.
+/// (home cell, id), their home cells, and the events it raised. Home cells and events are
+/// rare (most outputs stay in their cell and raise nothing) and live out of line: an output
+/// takes 32 bytes in the log's per-cell header, not 72.
 #[derive(Clone, Debug)]
 pub(super) struct Out<S, E> {
     /// The cell computed (global).
     pub(super) cell: u32,
-    /// The bodies it homes at the next step, sorted by (home cell, id).
-    pub(super) bodies: Shared<S>,
-    /// The home cell (global) of each of `bodies`; empty exactly when every body stays in
-    /// `cell`.
-    pub(super) homes: Vec<u32>,
-    /// The events the computation raised.
-    pub(super) events: Vec<Event<E>>,
     /// Whether a cell computation produced it (an empty cell's output is not computed).
     pub(super) computed: bool,
+    /// The bodies it homes at the next step, sorted by (home cell, id).
+    pub(super) bodies: Shared<S>,
+    /// Its home cells and events, if either is not empty.
+    rare: Option<Box<Rare<E>>>,
+}
+
+/// The rare parts of an [`Out`].
+#[derive(Clone, Debug)]
+struct Rare<E> {
+    /// The home cell (global) of each body; empty exactly when every body stays in the cell.
+    homes: Vec<u32>,
+    /// The events the computation raised.
+    events: Vec<Event<E>>,
 }
 
 impl<S, E> Out<S, E> {
-    /// The output of empty cell `cell`: nothing, not computed.
-    pub(super) fn empty(cell: u32) -> Self {
+    /// The output of cell `cell`: `bodies` with their home cells `homes` (empty exactly when
+    /// every body stays in `cell`) and `events`.
+    pub(super) fn new(
+        cell: u32,
+        bodies: Shared<S>,
+        homes: Vec<u32>,
+        events: Vec<Event<E>>,
+        computed: bool,
+    ) -> Self {
+        let rare =
+            (!homes.is_empty() || !events.is_empty()).then(|| Box::new(Rare { homes, events }));
         Out {
             cell,
-            bodies: None,
-            homes: Vec::new(),
-            events: Vec::new(),
-            computed: false,
+            computed,
+            bodies,
+            rare,
         }
+    }
+
+    /// The output of empty cell `cell`: nothing, not computed.
+    pub(super) fn empty(cell: u32) -> Self {
+        Out::new(cell, None, Vec::new(), Vec::new(), false)
+    }
+
+    /// The home cell (global) of each of `bodies`; empty exactly when every body stays in
+    /// the cell computed.
+    pub(super) fn homes(&self) -> &[u32] {
+        self.rare.as_ref().map_or(&[][..], |r| &r.homes)
+    }
+
+    /// The events the computation raised.
+    pub(super) fn events(&self) -> &[Event<E>] {
+        self.rare.as_ref().map_or(&[][..], |r| &r.events)
+    }
+
+    /// Bytes held out of line for its home cells and events.
+    fn rare_bytes(&self) -> usize {
+        self.rare.as_ref().map_or(0, |r| {
+            std::mem::size_of::<Rare<E>>()
+                + r.homes.len() * 4
+                + r.events.len() * std::mem::size_of::<Event<E>>()
+        })
     }
 
     /// Whether it homes no body and raised no event.
     pub(super) fn is_empty(&self) -> bool {
-        self.bodies.is_none() && self.events.is_empty()
+        self.bodies.is_none() && self.events().is_empty()
     }
 
     /// Whether every body it homes stays in the cell computed.
     pub(super) fn stays(&self) -> bool {
-        self.homes.is_empty()
+        self.homes().is_empty()
     }
 
     /// `(home cell, state)` of every body, sorted by (cell, id).
@@ -70,7 +111,7 @@ impl<S, E> Out<S, E> {
         view(&self.bodies)
             .iter()
             .enumerate()
-            .map(|(k, b)| (self.homes.get(k).copied().unwrap_or(self.cell), b))
+            .map(|(k, b)| (self.homes().get(k).copied().unwrap_or(self.cell), b))
     }
 
     /// The bodies homed in `cell`.
@@ -79,8 +120,8 @@ impl<S, E> Out<S, E> {
         if self.stays() {
             return if cell == self.cell { all } else { &[] };
         }
-        let lo = self.homes.partition_point(|c| *c < cell);
-        let hi = self.homes.partition_point(|c| *c <= cell);
+        let lo = self.homes().partition_point(|c| *c < cell);
+        let hi = self.homes().partition_point(|c| *c <= cell);
         &all[lo..hi]
     }
 }
@@ -90,10 +131,30 @@ impl<S, E> Out<S, E> {
 pub(super) struct Version<S> {
     /// Its sequence number: the highest live one is effective.
     pub(super) seq: u32,
-    /// The bodies it carries.
-    pub(super) bodies: Bodies<S>,
+    /// What it carries.
+    pub(super) content: Carried<S>,
     /// Delta ghosts: its `follows` flag (a ghost of the next step is on its way).
     pub(super) follows: bool,
+}
+
+/// What a received version carries.
+#[derive(Debug)]
+pub(super) enum Carried<S> {
+    /// A migration's bodies with their home cells.
+    Bodies(Bodies<S>),
+    /// A ghost, as the view of its cell (`None`: empty) that the slots take — shared, not
+    /// copied — while it is effective; within a process, the sender's logged state itself.
+    View(Shared<S>),
+}
+
+impl<S> Version<S> {
+    /// A migration's bodies (none for a ghost).
+    pub(super) fn bodies(&self) -> &[Homed<S>] {
+        match &self.content {
+            Carried::Bodies(b) => b,
+            Carried::View(_) => &[],
+        }
+    }
 }
 
 /// What a world has received under one identity (kind, step, source cell).
@@ -126,10 +187,20 @@ impl<S> Recv<S> {
 pub(super) struct Sent<S> {
     /// The sequence number of the last version sent.
     pub(super) seq: u32,
-    /// The bodies of the live version (`None`: cancelled, or nothing sent).
-    pub(super) live: Option<Bodies<S>>,
+    /// The content of the live version (`None`: cancelled, or nothing sent).
+    pub(super) live: Option<Live<S>>,
     /// The live version's `follows` flag.
     pub(super) follows: bool,
+}
+
+/// The content of a message sent.
+#[derive(Clone, Debug)]
+pub(super) enum Live<S> {
+    /// A migration's bodies, shared with the messages and the receivers' logs.
+    Bodies(Bodies<S>),
+    /// A ghost: the state of its cell, shared with the cell's log (the message itself
+    /// carries a copy that its receivers turn into their views).
+    State(Shared<S>),
 }
 
 /// Everything a world holds about one step.
@@ -143,8 +214,9 @@ pub(super) struct Slot<S, E> {
     pub(super) known: PerOwnCell<bool>,
     /// The view of each margin cell (indexed by [`MarginCell`]) at this step (K4: the
     /// effective ghost of the step, else — optimistic modes — the view of the step before;
-    /// `None`: empty). Shared, not copied, between the steps that inherit it.
-    pub(super) ghosts: Vec<Option<Arc<Vec<S>>>>,
+    /// `None`: empty). Shared, not copied, between the steps that inherit it, and (within a
+    /// process) with the sender's log.
+    pub(super) ghosts: Vec<Shared<S>>,
     /// Conservative mode: the foreign cells (global) whose ghost of this step has arrived.
     pub(super) ghost_known: BTreeSet<u32>,
     /// The bodies migrating in at this step, by own destination cell and foreign source
@@ -192,7 +264,7 @@ impl<S: Clone, E: Clone> Slot<S, E> {
 
     /// The view of margin cell `m` (empty if none).
     pub(super) fn ghost(&self, m: MarginCell) -> &[S] {
-        self.ghosts[m.index()].as_ref().map_or(&[][..], |v| &v[..])
+        view(&self.ghosts[m.index()])
     }
 
     /// An empty slot for `own` own cells and `margin` margin cells.
@@ -211,53 +283,109 @@ impl<S: Clone, E: Clone> Slot<S, E> {
         }
     }
 
-    /// Bytes this slot holds. A ghost view shared with the slot before (`prev`, the same
-    /// `Arc`) is counted there only; inputs count their states and removed ids.
-    pub(super) fn bytes(&self, prev: Option<&Slot<S, E>>) -> usize {
+    /// Bytes this slot holds, by part. An allocation of states shared by several holders
+    /// (a cell's state, its output, the next step's state, the sent log, the views of the
+    /// steps that inherit them, received versions) counts `1/n` at each of its `n` holders;
+    /// inputs count their states and removed ids.
+    pub(super) fn bytes(&self) -> LogBytes {
         let s = std::mem::size_of::<S>();
         let p = std::mem::size_of::<Homed<S>>();
         let v = std::mem::size_of::<Vec<S>>();
         let h = std::mem::size_of::<Shared<S>>();
-        let mut b = self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1);
-        // A cell's states shared by its output and the next step's state count half at each.
+        let mut b = LogBytes {
+            slots: (self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1)
+                + self.ghosts.len() * h
+                + (self.ghost_known.len() + self.migrate_known.len()) * 8)
+                as u64,
+            ..LogBytes::default()
+        };
+        // Each holder of a shared allocation counts its share.
         let held = |a: &Arc<[S]>| (16 + a.len() * s) / Arc::strong_count(a);
-        b += self.states.iter().flatten().map(held).sum::<usize>();
+        b.states += self.states.iter().flatten().map(held).sum::<usize>() as u64;
         for o in self.outs.iter().flatten() {
-            b += o.bodies.as_ref().map_or(0, held)
-                + o.homes.len() * 4
-                + o.events.len() * std::mem::size_of::<Event<E>>();
+            b.outputs += (o.bodies.as_ref().map_or(0, held) + o.rare_bytes()) as u64;
         }
-        b += self.ghosts.len() * std::mem::size_of::<Option<Arc<Vec<S>>>>();
-        for (k, g) in self.ghosts.iter().enumerate() {
-            let Some(g) = g else { continue };
-            let shared = prev
-                .and_then(|p| p.ghosts[k].as_ref())
-                .is_some_and(|h| Arc::ptr_eq(g, h));
-            b += if shared { 0 } else { 16 + v + g.len() * s };
-        }
+        b.ghosts += self.ghosts.iter().flatten().map(held).sum::<usize>() as u64;
         for input in self.inputs.values() {
-            b += 8 + input.edits.len() * 16 + input.removes.len() * 8 + input.adds.len() * p;
+            b.inputs +=
+                (8 + input.edits.len() * 16 + input.removes.len() * 8 + input.adds.len() * p)
+                    as u64;
         }
-        b += self
+        b.migrations += self
             .foreign_in
             .values()
             .map(|g| v + 8 + g.len() * s)
-            .sum::<usize>();
+            .sum::<usize>() as u64;
         // Message bodies are shared between the sender's log, the messages and the
         // receivers' logs: each holder counts its share.
         let share = |l: &Bodies<S>| (v + l.len() * p) / Arc::strong_count(l);
         for r in self.recv.values() {
-            b += 16 + r.antis.len() * 4;
-            b += r
-                .positives
-                .iter()
-                .map(|x| 8 + share(&x.bodies))
-                .sum::<usize>();
+            b.received += (16 + r.antis.len() * 4) as u64;
+            for x in &r.positives {
+                b.received += 8 + match &x.content {
+                    Carried::Bodies(l) => share(l),
+                    Carried::View(g) => g.as_ref().map_or(0, held),
+                } as u64;
+            }
         }
         for x in self.sent.values() {
-            b += 24 + x.live.as_ref().map_or(0, share);
+            b.sent += 24
+                + match &x.live {
+                    None => 0,
+                    Some(Live::Bodies(l)) => share(l),
+                    Some(Live::State(st)) => st.as_ref().map_or(0, held),
+                } as u64;
         }
-        b + (self.ghost_known.len() + self.migrate_known.len()) * 8
+        b
+    }
+}
+
+/// Bytes held by logs, by part (SPEC.md §K9: how they are counted). [`LogBytes::total`] is
+/// what `peak_log_bytes` samples.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LogBytes {
+    /// Own cells' states (the per-cell checkpoint log).
+    pub states: u64,
+    /// Own cells' outputs: bodies, home cells and events.
+    pub outputs: u64,
+    /// Views of margin cells (ghosts received).
+    pub ghosts: u64,
+    /// Bodies migrating in from foreign cells.
+    pub migrations: u64,
+    /// Inputs applied.
+    pub inputs: u64,
+    /// Messages received (versions and early anti-messages).
+    pub received: u64,
+    /// The log of what was sent.
+    pub sent: u64,
+    /// Fixed per slot: per-cell headers and the sets of known cells.
+    pub slots: u64,
+}
+
+impl LogBytes {
+    /// The sum of every part.
+    pub fn total(&self) -> u64 {
+        self.states
+            + self.outputs
+            + self.ghosts
+            + self.migrations
+            + self.inputs
+            + self.received
+            + self.sent
+            + self.slots
+    }
+}
+
+impl std::ops::AddAssign for LogBytes {
+    fn add_assign(&mut self, o: LogBytes) {
+        self.states += o.states;
+        self.outputs += o.outputs;
+        self.ghosts += o.ghosts;
+        self.migrations += o.migrations;
+        self.inputs += o.inputs;
+        self.received += o.received;
+        self.sent += o.sent;
+        self.slots += o.slots;
     }
 }
 
@@ -299,7 +427,7 @@ impl<M: CellModel> World<M> {
     pub fn events_at(&self, s: Step) -> impl Iterator<Item = &Event<M::Event>> + '_ {
         self.slot(s)
             .into_iter()
-            .flat_map(|s| s.outs.iter().flatten().flat_map(|o| o.events.iter()))
+            .flat_map(|s| s.outs.iter().flatten().flat_map(|o| o.events().iter()))
     }
 
     /// Records that step `t` was committed (counts the committed cell computations at
@@ -314,13 +442,16 @@ impl<M: CellModel> World<M> {
 
     /// Bytes held by the logs now.
     pub fn log_bytes(&self) -> u64 {
-        let mut prev = None;
-        let mut b = 0;
+        self.log_breakdown().total()
+    }
+
+    /// Bytes held by the logs now, by part.
+    pub fn log_breakdown(&self) -> LogBytes {
+        let mut b = LogBytes::default();
         for s in &self.slots {
-            b += s.bytes(prev);
-            prev = Some(s);
+            b += s.bytes();
         }
-        b as u64
+        b
     }
 
     /// Number of steps the logs hold now.

@@ -30,6 +30,7 @@ mod territory;
 mod throttle;
 
 use self::index::{OwnCell, PerOwnCell};
+pub use self::log::LogBytes;
 use self::log::Slot;
 use self::territory::Nb;
 use self::throttle::Throttle;

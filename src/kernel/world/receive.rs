@@ -3,7 +3,7 @@
 
 use super::index::OwnCell;
 use super::keys::{MigrationIn, RecvKey};
-use super::log::{view, Version};
+use super::log::{view, Carried, Shared, Version};
 use super::World;
 use crate::kernel::config::RollbackMode;
 use crate::kernel::message::{Bodies, Message, MessageKind, Sign};
@@ -70,7 +70,7 @@ impl<M: CellModel> World<M> {
         let before = r.effective().map(|e| e.seq);
         // The cells the effective migration landed in (ghosts do not need them).
         let old_cells: Vec<u32> = match r.effective() {
-            Some(e) if kind == MessageKind::Migrate => e.bodies.iter().map(|h| h.cell).collect(),
+            Some(e) if kind == MessageKind::Migrate => e.bodies().iter().map(|h| h.cell).collect(),
             _ => Vec::new(),
         };
         match msg.sign {
@@ -79,10 +79,18 @@ impl<M: CellModel> World<M> {
                     r.antis.swap_remove(k);
                     self.counters.annihilated += 1;
                 } else {
+                    // A ghost is kept as the view it gives (the message's copy is dropped:
+                    // moved out when this world holds its only reference).
+                    let (seq, follows) = (msg.seq, msg.follows);
+                    let content = if kind == MessageKind::Ghost {
+                        Carried::View(Self::ghost_view(msg))
+                    } else {
+                        Carried::Bodies(msg.bodies)
+                    };
                     r.positives.push(Version {
-                        seq: msg.seq,
-                        bodies: msg.bodies,
-                        follows: msg.follows,
+                        seq,
+                        content,
+                        follows,
                     });
                 }
             }
@@ -103,11 +111,12 @@ impl<M: CellModel> World<M> {
             // The view of `src` at `step`: the effective ghost, else the view of the step
             // before (K4, delta ghosts).
             let (view, follows) = match r.effective() {
-                Some(e) if e.bodies.is_empty() => (None, e.follows),
-                Some(e) => (
-                    Some(Arc::new(e.bodies.iter().map(|h| h.state.clone()).collect())),
-                    e.follows,
-                ),
+                Some(Version {
+                    content: Carried::View(v),
+                    follows,
+                    ..
+                }) => (v.clone(), *follows),
+                Some(_) => unreachable!("a ghost's version carries a view"),
                 None if i > 0 && delta => {
                     let m = self.margin_cell(src);
                     (self.slots[i - 1].ghosts[m.index()].clone(), false)
@@ -125,7 +134,10 @@ impl<M: CellModel> World<M> {
             }
             return dirtied;
         }
-        let new: Bodies<M::State> = r.effective().map(|e| e.bodies.clone()).unwrap_or_default();
+        let new: Bodies<M::State> = match r.effective().map(|e| &e.content) {
+            Some(Carried::Bodies(b)) => b.clone(),
+            _ => Bodies::default(),
+        };
         match kind {
             MessageKind::Input => unreachable!("inputs are applied by apply_input"),
             MessageKind::Ghost => unreachable!("ghosts are applied above"),
@@ -171,6 +183,23 @@ impl<M: CellModel> World<M> {
         }
     }
 
+    /// The view a ghost gives (`None`: empty): the sender's state itself when the message
+    /// carries it (within a process), else its bodies' states.
+    pub(super) fn ghost_view(msg: Message<M::State>) -> Shared<M::State> {
+        if msg.bodies.is_empty() {
+            return None;
+        }
+        match msg.view {
+            Some(v) if v.len() == msg.bodies.len() => Some(v),
+            _ => Some(
+                Arc::unwrap_or_clone(msg.bodies)
+                    .into_iter()
+                    .map(|h| h.state)
+                    .collect(),
+            ),
+        }
+    }
+
     /// Sets the view of foreign cell `src` at `t` to `view` (`None`: empty) and, with delta
     /// ghosts, carries it forward to the later steps that inherit it (up to the next step
     /// with an effective ghost of its own) — unless the ghost `follows` (a ghost of `t + 1`
@@ -181,7 +210,7 @@ impl<M: CellModel> World<M> {
         &mut self,
         src: u32,
         t: Step,
-        view: Option<Arc<Vec<M::State>>>,
+        view: Shared<M::State>,
         follows: bool,
     ) -> Option<Step> {
         let carry = self.delta() && !follows;

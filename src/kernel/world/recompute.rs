@@ -99,15 +99,18 @@ impl<M: CellModel> World<M> {
         }
         self.counters.cells_computed += 1;
         if stays {
+            // An output bit-identical to the cell's state (bodies at rest, an unchanged cell)
+            // is that state's allocation: the log holds an unchanged cell once, whatever the
+            // number of steps (SPEC.md §K3).
+            let state = &self.slots[self.si(s)].states[x];
+            if events.is_empty() && Self::same_states(&self.scratch, view(state)) {
+                let bodies = state.clone();
+                self.scratch.clear();
+                return Out::new(cell, bodies, Vec::new(), events, true);
+            }
             // The common case: one allocation, written once, shared with the next state.
             let bodies = (!self.scratch.is_empty()).then(|| self.scratch.drain(..).collect());
-            return Out {
-                cell,
-                bodies,
-                homes: Vec::new(),
-                events,
-                computed: true,
-            };
+            return Out::new(cell, bodies, Vec::new(), events, true);
         }
         // Sorted by (home cell, id), without the bodies that left the domain.
         let mut order: Vec<usize> = (0..homes.len()).filter(|&k| homes[k] != u32::MAX).collect();
@@ -120,13 +123,7 @@ impl<M: CellModel> World<M> {
         let bodies =
             (!order.is_empty()).then(|| order.iter().map(|&k| scratch[k].clone()).collect());
         self.scratch.clear();
-        Out {
-            cell,
-            bodies,
-            homes: out_homes,
-            events,
-            computed: true,
-        }
+        Out::new(cell, bodies, out_homes, events, true)
     }
 
     /// Whether two outputs are the same (early cut-off and lazy cancellation compare
@@ -137,8 +134,8 @@ impl<M: CellModel> World<M> {
         b: &Out<M::State, M::Event>,
     ) -> bool {
         let (x, y) = (view(&a.bodies), view(&b.bodies));
-        a.events == b.events
-            && a.homes == b.homes
+        a.events() == b.events()
+            && a.homes() == b.homes()
             && x.len() == y.len()
             && x.iter().zip(y).all(|(p, q)| self.same_entity(p, q))
     }
@@ -224,7 +221,13 @@ impl<M: CellModel> World<M> {
         if Self::same_states(&v, self.slots[i].state(x)) {
             return None;
         }
-        Some(std::mem::replace(&mut self.slots[i].states[x], share(v)))
+        // Unchanged since the step before: share that state's allocation (SPEC.md §K3).
+        let new = if Self::same_states(&v, self.slots[i - 1].state(x)) {
+            self.slots[i - 1].states[x].clone()
+        } else {
+            share(v)
+        };
+        Some(std::mem::replace(&mut self.slots[i].states[x], new))
     }
 
     /// The own cells around `cell` whose computation at `s` must be redone because the state
@@ -370,7 +373,7 @@ impl<M: CellModel> World<M> {
                 landings[x] += u32::from(o.bodies.is_some());
             } else {
                 let mut last = None;
-                for &d in &o.homes {
+                for &d in o.homes() {
                     if last == Some(d) {
                         continue;
                     }

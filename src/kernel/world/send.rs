@@ -3,7 +3,7 @@
 
 use super::index::OwnCell;
 use super::keys::SentKey;
-use super::log::Sent;
+use super::log::{view, Live, Sent};
 use super::World;
 use crate::kernel::config::{PlantedBug, RollbackMode};
 use crate::kernel::message::{Bodies, Homed, Message, MessageKind, Sign};
@@ -22,7 +22,7 @@ impl<M: CellModel> World<M> {
         &mut self,
         step: Step,
         key: SentKey,
-        content: Option<Bodies<M::State>>,
+        content: Option<Live<M::State>>,
         follows: bool,
         out: &mut Vec<Message<M::State>>,
     ) {
@@ -39,7 +39,7 @@ impl<M: CellModel> World<M> {
         if !conservative {
             let same = match (live, &content) {
                 (None, None) => true,
-                (Some(a), Some(b)) => live_follows == follows && self.same_bodies(a, b),
+                (Some(a), Some(b)) => live_follows == follows && self.same_live(a, b),
                 _ => false,
             };
             if same {
@@ -53,7 +53,7 @@ impl<M: CellModel> World<M> {
         });
         let me = self.id;
         let bug = self.bug;
-        let msg = |sign, seq, bodies| Message {
+        let msg = |sign, seq, bodies, view| Message {
             edits: Vec::new(),
             step,
             kind,
@@ -65,30 +65,63 @@ impl<M: CellModel> World<M> {
             bodies,
             removes: Vec::new(),
             follows: sign == Sign::Positive && follows,
+            view,
         };
         if entry.live.take().is_some() {
             let dropped = bug == PlantedBug::DropLoneAnti && content.is_none();
             if !conservative && !dropped {
-                out.push(msg(Sign::Anti, entry.seq, Bodies::default()));
+                out.push(msg(Sign::Anti, entry.seq, Bodies::default(), None));
                 self.counters.anti_messages_sent += 1;
             }
         }
         if let Some(content) = content {
             entry.seq += 1;
-            entry.live = Some(content.clone());
             entry.follows = follows;
+            // A ghost's message carries a copy of the state with its cell; the log keeps the
+            // state itself (shared with the cell's log).
+            // (and, within a process, the state itself for the receiver's view).
+            let (bodies, shared): (Bodies<M::State>, _) = match &content {
+                Live::Bodies(b) => (b.clone(), None),
+                Live::State(st) => (
+                    Arc::new(
+                        view(st)
+                            .iter()
+                            .map(|b| Homed {
+                                cell,
+                                state: b.clone(),
+                            })
+                            .collect(),
+                    ),
+                    st.clone(),
+                ),
+            };
+            entry.live = Some(content);
+            let content = bodies;
             // Null messages are conservative mode's; an empty delta ghost (a border cell that
             // emptied) is news, counted as a ghost only.
             if conservative && content.is_empty() {
                 self.counters.null_messages_sent += 1;
             }
-            out.push(msg(Sign::Positive, entry.seq, content));
+            out.push(msg(Sign::Positive, entry.seq, content, shared));
             self.counters.messages_sent += 1;
             match kind {
                 MessageKind::Ghost => self.counters.ghosts_sent += 1,
                 MessageKind::Migrate => self.counters.migrates_sent += 1,
                 MessageKind::Input => {}
             }
+        }
+    }
+
+    /// Whether two contents sent under one identity are the same (by
+    /// [`World::same_entity`]).
+    fn same_live(&self, a: &Live<M::State>, b: &Live<M::State>) -> bool {
+        match (a, b) {
+            (Live::Bodies(a), Live::Bodies(b)) => self.same_bodies(a, b),
+            (Live::State(a), Live::State(b)) => {
+                let (a, b) = (view(a), view(b));
+                a.len() == b.len() && a.iter().zip(b).all(|(p, q)| self.same_entity(p, q))
+            }
+            _ => false,
         }
     }
 
@@ -127,17 +160,7 @@ impl<M: CellModel> World<M> {
             let now = self.changed(x, t);
             (now || (t > self.origin && self.changed(x, t - 1)), now)
         };
-        let cur = self.slots[self.si(t)].state(x);
-        let content: Option<Bodies<M::State>> = send.then(|| {
-            Arc::new(
-                cur.iter()
-                    .map(|b| Homed {
-                        cell,
-                        state: b.clone(),
-                    })
-                    .collect(),
-            )
-        });
+        let content = send.then(|| Live::State(self.slots[self.si(t)].states[x].clone()));
         for k in 0..self.targets[x].len() {
             let w = self.targets[x][k];
             let key = SentKey {
@@ -172,7 +195,7 @@ impl<M: CellModel> World<M> {
             })
             .unwrap_or_default();
         let content = (self.mode == RollbackMode::Conservative || !content.is_empty())
-            .then(|| Arc::new(content));
+            .then(|| Live::Bodies(Arc::new(content)));
         let key = SentKey {
             kind: MessageKind::Migrate,
             src_cell: self.cells[x],
