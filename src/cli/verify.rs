@@ -9,7 +9,7 @@ use super::output::print;
 use super::source::SceneArgs;
 use anyhow::{bail, Result};
 use clap::Args;
-use soda::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode};
+use soda::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, WindowSpec};
 use soda::scene::SceneFormat;
 use soda::sim::ExecutorKind;
 use soda::verify::{verify_with_progress, RunOutcome, VerifyOptions, VerifySetup};
@@ -86,10 +86,10 @@ pub struct VerifyArgs {
           value_parser = whole(0, u64::MAX))]
     pub mpi_repeats: u64,
 
-    /// Optimism window.
-    #[arg(long, value_name = "W", default_value_t = 16, help_heading = "Run",
-          value_parser = whole(1, 1_000_000))]
-    pub window: u64,
+    /// Optimism window: W steps, or `auto` (`auto:W`), a window each world adapts by its
+    /// rollbacks up to 64 (W).
+    #[arg(long, value_name = "W", default_value = "16", help_heading = "Run")]
+    pub window: WindowSpec,
 
     /// How cells are assigned to worlds.
     #[arg(long, value_enum, default_value = "blocks", help_heading = "Run")]
@@ -146,8 +146,9 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         );
     }
     let threads = args.threads.map_or_else(default_threads, |t| t as usize);
-    let mut kernel = KernelConfig::new(args.worlds as usize)
-        .window(args.window)
+    let mut kernel = args
+        .window
+        .apply(KernelConfig::new(args.worlds as usize))
         .partition(args.partition.into())
         .partition_seed(args.partition_seed.unwrap_or(0))
         .ghosts(args.ghosts.into());
