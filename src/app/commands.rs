@@ -103,7 +103,7 @@ pub fn print_report(model: &dyn RegisteredModel, report: &ModelReport, json: boo
             k.worlds,
             k.threads,
             k.mode.name(),
-            k.window
+            k.window_spec()
         ))
     );
     println!(

@@ -781,7 +781,7 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
                 k.worlds,
                 k.partition.name(),
                 k.mode.name(),
-                window_label(k.window, k.window_auto),
+                k.window_spec(),
                 k.threads,
                 if k.threads == 1 { "" } else { "s" },
                 k.mpi
@@ -862,13 +862,4 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
         .iter()
         .map(|(k, v)| format!("{k:<16} {v}\n"))
         .collect()
-}
-
-/// The window as the summary shows it: `16`, or `auto:64` for an adaptive one.
-fn window_label(window: u64, auto: bool) -> String {
-    if auto {
-        soda::kernel::WindowSpec::Auto(window).to_string()
-    } else {
-        window.to_string()
-    }
 }

@@ -23,13 +23,7 @@ pub fn run_row(report: &RunReport, bodies: usize) -> Vec<(String, String)> {
     );
     put(
         "window",
-        k.map_or("0".into(), |k| {
-            if k.window_auto {
-                soda::kernel::WindowSpec::Auto(k.window).to_string()
-            } else {
-                k.window.to_string()
-            }
-        }),
+        k.map_or("0".into(), |k| k.window_spec().to_string()),
     );
     put(
         "partition",
