@@ -33,15 +33,7 @@ pub fn run(
         eprintln!("warning: Ctrl-C will not stop the run cleanly: {e}");
     }
     // An MPI run: every rank runs this, only rank 0 writes and prints.
-    #[cfg(feature = "mpi")]
-    let session = match options.executor {
-        crate::sim::ExecutorKind::Mpi => Some(crate::exec::mpi::Session::init()?),
-        _ => None,
-    };
-    #[cfg(feature = "mpi")]
-    let root = session.as_ref().is_none_or(|s| s.is_root());
-    #[cfg(not(feature = "mpi"))]
-    let root = true;
+    let (_session, root) = mpi_role(options.executor == crate::sim::ExecutorKind::Mpi)?;
     let checkpoint = checkpoint.filter(|_| root);
     let (report, written) = model.run_from(size, &options, None, steps, checkpoint)?;
     if !root {
@@ -145,16 +137,7 @@ pub fn verify(
     options: &VerifyOptions,
 ) -> Result<()> {
     // MPI runs: every rank runs this, only rank 0 checks and prints.
-    #[cfg(feature = "mpi")]
-    let session = if options.mpi_repeats > 0 {
-        Some(crate::exec::mpi::Session::init()?)
-    } else {
-        None
-    };
-    #[cfg(feature = "mpi")]
-    let root = session.as_ref().is_none_or(|s| s.is_root());
-    #[cfg(not(feature = "mpi"))]
-    let root = true;
+    let (_session, root) = mpi_role(options.mpi_repeats > 0)?;
     if !root {
         model.verify(size, options, &mut |_| {});
         return Ok(());
@@ -274,4 +257,23 @@ pub fn plot(trace: &Path, out: &Path) -> Result<()> {
         println!("wrote {}", path.display());
     }
     Ok(())
+}
+
+/// This process's MPI session (held for the command) and whether it is the one that prints:
+/// under `mpirun` (`mpi`) rank 0 only; otherwise always. Without the `mpi` feature there is
+/// no session, and the MPI runs themselves fail saying how to build it.
+#[cfg(feature = "mpi")]
+fn mpi_role(mpi: bool) -> Result<(Option<crate::exec::mpi::Session>, bool)> {
+    if !mpi {
+        return Ok((None, true));
+    }
+    let session = crate::exec::mpi::Session::init()?;
+    let root = session.is_root();
+    Ok((Some(session), root))
+}
+
+/// Without the `mpi` feature: no session, and this process prints.
+#[cfg(not(feature = "mpi"))]
+fn mpi_role(_mpi: bool) -> Result<(Option<()>, bool)> {
+    Ok((None, true))
 }
