@@ -34,6 +34,11 @@ pub struct ContactSet {
     pub restitution: f32,
     /// The points.
     pub points: SmallVec<[ContactPoint; 4]>,
+    /// Whether the partner is a movable body resting against `i` in a supported pile (SPEC.md
+    /// §5.3, pile contacts): solved here with the partner's inverse mass, so each of the two
+    /// bodies takes its share of the contact, and its position correction is added whole
+    /// rather than averaged with the other partners' (the two shares remove the overlap once).
+    pub shared: bool,
 }
 
 /// A pair manifold between bodies `a` (lower id) and `b`, in world frame.
@@ -147,6 +152,7 @@ pub(crate) fn view(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
         friction: 0.5 * (i.friction + j.friction),
         restitution: 0.5 * (i.restitution + j.restitution),
         points,
+        shared: false,
     }
 }
 
@@ -231,5 +237,6 @@ pub(crate) fn environment_contacts(
         friction: 0.5 * (env.friction + i.friction),
         restitution: 0.5 * (env.restitution + i.restitution),
         points,
+        shared: false,
     })
 }

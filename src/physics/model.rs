@@ -119,9 +119,18 @@ impl RigidBodyModel {
             };
             partners_quiet &= j.is_quiet(self.params.sleep_speed);
             match self.support(a, b, &m) {
-                // Shock propagation: a partner resting on `own` is ignored; a partner `own`
-                // rests on is immovable.
-                Some(lower) if lower == own.body.id => {}
+                // Shock propagation: a partner resting on `own` is ignored, unless it sleeps
+                // (a frozen body does not move out of the way, so a woken lower body must
+                // not move into it: it takes its share of the contact, as a pile contact);
+                // a partner `own` rests on is immovable.
+                Some(lower) if lower == own.body.id => {
+                    if self.is_asleep(j) {
+                        let mut set = view(own.body, j, &m);
+                        set.restitution = 0.0;
+                        set.shared = true;
+                        sets.push(set);
+                    }
+                }
                 Some(_) => {
                     support_depth = support_depth.min(j.support_depth.saturating_add(1));
                     let mut set = view(own.body, j, &m);
@@ -130,12 +139,27 @@ impl RigidBodyModel {
                     }
                     sets.push(set);
                 }
-                None if self.is_asleep(a) && self.is_asleep(b) => {}
-                None => pairs.push(PairEntry {
-                    partner: j,
-                    offset: c.offset,
-                    contact: self.pair_contact(a, b, &m),
-                }),
+                None => {
+                    let contact = self.pair_contact(a, b, &m);
+                    if self.in_pile(a, b, &contact) {
+                        // A resting contact in a supported pile: both bodies' own solves
+                        // share it (SPEC.md §5.3). It does not bounce. Kept when both bodies
+                        // sleep: it only moves `own`, and a sleeping body that something woke
+                        // must not roll into a sleeping neighbour.
+                        let mut set = view(own.body, j, &m);
+                        set.restitution = 0.0;
+                        set.shared = true;
+                        sets.push(set);
+                    } else if self.is_asleep(a) && self.is_asleep(b) {
+                        // Two sleeping bodies form no pair: a frozen body must not be moved.
+                    } else {
+                        pairs.push(PairEntry {
+                            partner: j,
+                            offset: c.offset,
+                            contact,
+                        })
+                    }
+                }
             }
         }
         sets.sort_unstable_by_key(|s| s.partner);
@@ -296,6 +320,20 @@ impl RigidBodyModel {
         (lower.support_depth > 0).then_some(lower.id)
     }
 
+    /// Whether the symmetric contact of `a` and `b` is a *pile contact* (SPEC.md §5.3): with
+    /// gravity, not an impact, and one of the two resting on a support chain (support depth
+    /// above 0). It is then solved in each body's own solve, with the partner's inverse mass,
+    /// together with its supports: solved apart from them, by one split-mass pass per step
+    /// and an overlap projection that changed no velocity, a pile's resting contacts kept an
+    /// approach that never turned into motion, and ball piles never came to rest. Two bodies
+    /// in flight (both at depth 0) and every impact stay pairs, whose momentum is exact. A
+    /// pure function of the pair's step-`t` states, so both bodies classify it alike.
+    fn in_pile(&self, a: &Body, b: &Body, contact: &PairContact) -> bool {
+        !self.matched()
+            && (a.support_depth > 0 || b.support_depth > 0)
+            && !contact.edge(self.rest_speed()).is_some_and(|e| e.impact)
+    }
+
     /// Whether a deferred impact is only projected (without gravity, SPEC.md §5.3): it keeps
     /// its velocities, which only impulses change; under gravity it would gain `g·dt` of
     /// approach per step while its position is held, so it is resolved with split masses.
@@ -331,7 +369,11 @@ impl RigidBodyModel {
         if self.support(a, b, &m).is_some() {
             return None;
         }
-        self.pair_contact(a, b, &m).edge(self.rest_speed())
+        let contact = self.pair_contact(a, b, &m);
+        if self.in_pile(a, b, &contact) {
+            return None;
+        }
+        contact.edge(self.rest_speed())
     }
 
     /// What `own`'s pair with `entry` (closing, as `edge`) meets among the closing symmetric

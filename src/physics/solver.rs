@@ -313,6 +313,9 @@ pub(crate) fn solve_body(
         let mut sum_dx = Vec3::zeros();
         let mut sum_dtheta = Vec3::zeros();
         let mut active = 0u32;
+        // Pile contacts (`ContactSet::shared`): the body's share of each overlap, added whole.
+        let mut shared_dx = Vec3::zeros();
+        let mut shared_dtheta = Vec3::zeros();
         let mut k = 0;
         for set in sets {
             let mut dx = Vec3::zeros();
@@ -344,14 +347,20 @@ pub(crate) fn solve_body(
                 }
             }
             k += set.points.len();
-            if touched {
+            if touched && set.shared {
+                shared_dx += dx;
+                shared_dtheta += dtheta;
+            } else if touched {
                 active += 1;
                 sum_dx += dx;
                 sum_dtheta += dtheta;
             }
         }
-        let (x1, q1, dtheta) = if active > 0 {
-            let scale = p.relaxation / active as f32;
+        let shared = shared_dx != Vec3::zeros() || shared_dtheta != Vec3::zeros();
+        let (x1, q1, dtheta) = if active > 0 || shared {
+            let scale = p.relaxation / active.max(1) as f32;
+            let sum_dx = sum_dx + shared_dx * active.max(1) as f32;
+            let sum_dtheta = sum_dtheta + shared_dtheta * active.max(1) as f32;
             let dtheta = sum_dtheta * scale;
             (
                 xp + sum_dx * scale,
