@@ -96,7 +96,9 @@ impl Throttle {
         self.seen_gvt = gvt;
         self.advances += 1;
         let done = c.steps_computed.saturating_sub(self.computed_at_start);
-        let wasted = c.steps_rolled_back.saturating_sub(self.rolled_back_at_start);
+        let wasted = c
+            .steps_rolled_back
+            .saturating_sub(self.rolled_back_at_start);
         let failed = self
             .trial
             .is_some_and(|before| wasted as f64 > before * done as f64);
@@ -195,7 +197,11 @@ mod tests {
         fn epoch(&mut self, done: u64, wasted: u64, held: bool) -> Step {
             let before = self.w;
             for _ in 1..EPOCH {
-                assert_eq!(self.advance(0, 0, held), before, "changed before the epoch's end");
+                assert_eq!(
+                    self.advance(0, 0, held),
+                    before,
+                    "changed before the epoch's end"
+                );
             }
             self.advance(done, wasted, held)
         }
@@ -206,7 +212,11 @@ mod tests {
         let mut r = Run::new(3);
         assert_eq!(r.w, START.min(3));
         for want in [2, 3, 3] {
-            assert_eq!(r.epoch(100, 1, true), want, "1 % wasted: wider, up to the ceiling");
+            assert_eq!(
+                r.epoch(100, 1, true),
+                want,
+                "1 % wasted: wider, up to the ceiling"
+            );
         }
         assert_eq!(r.epoch(100, 5, true), 3, "5 %: kept");
         assert_eq!(r.epoch(100, 30, true), 1, "30 %: halved");
@@ -244,7 +254,11 @@ mod tests {
             waited += 1;
         }
         assert_eq!(waited, 8);
-        assert_eq!(r.epoch(100, 0, true), 3, "kept, and the next step is tried at once");
+        assert_eq!(
+            r.epoch(100, 0, true),
+            3,
+            "kept, and the next step is tried at once"
+        );
     }
 
     #[test]
