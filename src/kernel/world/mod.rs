@@ -370,8 +370,7 @@ impl<M: CellModel> World<M> {
     /// computes.)
     pub fn act(&mut self, gvt: Step) -> Vec<Message<M::State>> {
         if let Some(t) = &mut self.throttle {
-            let c = &self.counters;
-            self.window = t.on_gvt(gvt, self.window, c.steps_computed, c.steps_rolled_back);
+            self.window = t.on_gvt(gvt, self.window, &self.counters);
         }
         let mut out = Vec::new();
         if self.mode == RollbackMode::Conservative {
@@ -379,6 +378,11 @@ impl<M: CellModel> World<M> {
         } else {
             self.act_optimistic(gvt, &mut out);
             self.flush_ghosts(&mut out);
+            if let Some(t) = &mut self.throttle {
+                if self.head < self.end && self.head + 1 >= gvt + self.window {
+                    t.held_back();
+                }
+            }
         }
         if self.record.is_some() {
             let lvt = self.lvt();
