@@ -19,6 +19,7 @@ and the medians are printed per binary. Needs python3 (standard library only), D
   scripts/measure-view-fps.py --soda /tmp/old/soda --soda target/release/soda --runs 3
   scripts/measure-view-fps.py --query scale=1 --query scale=auto   # the page's render scale
   scripts/measure-view-fps.py --page web   # this checkout's page, without rebuilding soda
+  scripts/measure-view-fps.py --floor 'n=0' --floor 'n=8000&mode=points' --runs 2   # three.js alone
 
 Use it on an otherwise idle machine if you can: the page, Chromium's software GL and the
 simulation share its cores, and other work moves the numbers by a factor of two.
@@ -226,6 +227,53 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
     }
 
 
+def floor(query, seconds, warmup, size):
+    """scripts/view-floor.html?QUERY (three.js alone) in the same browser set-up: page fps."""
+    import shutil
+    import tempfile
+    here = os.path.dirname(os.path.abspath(__file__))
+    with tempfile.TemporaryDirectory() as d:
+        shutil.copy(os.path.join(here, "view-floor.html"), os.path.join(d, "index.html"))
+        os.symlink(os.path.join(here, "..", "web", "vendor"), os.path.join(d, "vendor"))
+        pport, port = free_port(), free_port()
+        static = subprocess.Popen([sys.executable, "-m", "http.server", "--bind", "127.0.0.1",
+                                   str(pport), "--directory", d],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        driver = subprocess.Popen(["chromedriver", f"--port={port}"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            base = f"http://127.0.0.1:{port}"
+            deadline = time.time() + 20
+            while True:
+                try:
+                    request("GET", base + "/status")
+                    break
+                except OSError:
+                    if time.time() > deadline:
+                        raise
+                    time.sleep(0.1)
+            caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
+                "binary": "/usr/bin/chromium", "args": CHROME_ARGS + [f"--window-size={size}"]}}}}
+            s = base + "/session/" + request("POST", base + "/session", caps)["value"]["sessionId"]
+            js = lambda script: request("POST", s + "/execute/sync", {"script": script, "args": []})["value"]
+            w, h = (int(x) for x in size.split(","))
+            request("POST", s + "/goog/cdp/execute", {"cmd": "Emulation.setDeviceMetricsOverride", "params": {
+                "width": w, "height": h, "deviceScaleFactor": 1, "mobile": False}})
+            request("POST", s + "/url", {"url": f"http://127.0.0.1:{pport}/index.html?{query}"})
+            time.sleep(warmup)
+            js(COUNTERS)
+            time.sleep(seconds)
+            r = js(READ)
+            request("DELETE", s)
+        finally:
+            driver.kill()
+            driver.wait()
+            static.kill()
+            static.wait()
+    return {"page_fps": round(r["raf"] / r["seconds"], 1), "update_ms": round(r["draw_ms"], 2),
+            "render_ms": round(r["render_ms"], 2)}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--soda", action="append", help="soda binary (repeat to compare; runs alternate)")
@@ -238,11 +286,21 @@ def main():
     ap.add_argument("--window-size", default="1280,720")
     ap.add_argument("--query", action="append",
                     help="add this query to the page's address (e.g. scale=1); repeat to compare")
+    ap.add_argument("--floor", action="append",
+                    help="instead of soda view, measure scripts/view-floor.html?FLOOR (three.js "
+                         "alone: e.g. n=8000&mode=points); repeat to compare")
     ap.add_argument("--screenshot", help="save a screenshot of each run's page as PREFIX-N.png")
     ap.add_argument("view_args", nargs="*",
                     default=["--objects", "8000", "--threads", "2", "--worlds", "8"],
                     help="soda view options (after --)")
     a = ap.parse_args()
+    if a.floor:
+        print(f"# scripts/view-floor.html, {a.seconds:g} s after {a.warmup:g} s, window {a.window_size}; "
+              f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
+        for run in range(a.runs):
+            for q in a.floor:
+                print(json.dumps({"floor": q, "run": run + 1, **floor(q, a.seconds, a.warmup, a.window_size)}), flush=True)
+        return 0
     binaries = a.soda or ["target/release/soda"]
     pages = a.page or [None]
     queries = a.query or [""]
