@@ -184,9 +184,11 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
         m0 = {m["name"]: m["value"] for m in cdp("Performance.getMetrics", {})["metrics"]}
         pids = [viewer.pid] + descendants(driver.pid)
         c0 = cpu_seconds(pids)
+        load0 = os.getloadavg()[0]
         js(COUNTERS)
         time.sleep(seconds)
         r = js(READ)
+        load1 = os.getloadavg()[0]
         c1 = cpu_seconds(pids)
         m1 = {m["name"]: m["value"] for m in cdp("Performance.getMetrics", {})["metrics"]}
         if screenshot:
@@ -219,6 +221,7 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
         "renderer_task_s_per_s": round((m1["TaskDuration"] - m0["TaskDuration"]) / wall, 2),
         "renderer_script_s_per_s": round((m1["ScriptDuration"] - m0["ScriptDuration"]) / wall, 2),
         "cpu_per_process": {k: v for k, v in sorted(cpu.items()) if v >= 0.01},
+        "loadavg": [round(load0, 1), round(load1, 1)],   # 1-minute load, this run's own included
         "canvas": r["canvas"],
         "scale": (r["stats"] or {}).get("scale", 1),
         "stats": r["stats"],
