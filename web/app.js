@@ -16,8 +16,9 @@ window.soda = soda;
 
 // --- three.js scene ---------------------------------------------------------------------
 const host = $('view');
-const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
-renderer.setPixelRatio(window.devicePixelRatio);
+// No multisampling, at most one pixel per CSS pixel (times the render scale, below): a
+// software GL draws every pixel on the CPU.
+const renderer = new THREE.WebGLRenderer({ antialias: false, powerPreference: 'high-performance' });
 host.appendChild(renderer.domElement);
 const world3 = new THREE.Scene();
 world3.background = new THREE.Color(0x1a2027);
@@ -29,14 +30,82 @@ const sun = new THREE.DirectionalLight(0xffffff, 1.8);
 sun.position.set(0.4, 1, 0.3);
 world3.add(sun);
 
-const boxGeometry = new THREE.BoxGeometry(2, 2, 2);
-const ballGeometry = new THREE.SphereGeometry(1, 16, 12);
-const bodyMaterial = new THREE.MeshLambertMaterial({ color: 0xffffff });
-let boxes = null, balls = null;           // InstancedMesh, grown as needed
-let boxIds = [], ballIds = [];            // instance index -> body id
+// Bodies are drawn as one mesh per shape whose vertices and colours the page writes for
+// every frame, lit on the CPU, with an unlit material: software GL (SwiftShader, a machine
+// without a GPU) pays per instance drawn and per pixel shaded, and 8,000 instanced, per-pixel
+// lit cubes took ~300 ms a frame (docs/performance.md, "The viewer page"). A box is its 8
+// corners, each face coloured by the light it gets through one corner that belongs to it
+// alone (a `flat` colour, taken from a triangle's last vertex); a ball is a low-poly
+// icosahedron (42 vertices) lit per vertex.
+const boxShape = boxWithFaceCorners();
+const ballShape = weld(new THREE.IcosahedronGeometry(1, 1));
+const boxMaterial = new THREE.MeshBasicMaterial({ vertexColors: true });
+boxMaterial.onBeforeCompile = (shader) => {
+  shader.vertexShader = shader.vertexShader.replace('#include <color_pars_vertex>', 'flat varying vec3 vColor;');
+  shader.fragmentShader = shader.fragmentShader.replace('#include <color_pars_fragment>', 'flat varying vec3 vColor;');
+};
+const ballMaterial = new THREE.MeshBasicMaterial({ vertexColors: true });
+let boxes = null, balls = null;           // Bodies of each shape, grown as needed
 let flashMesh = null;                     // cells flashing after a rollback
 const flash = new Map();                  // cell -> intensity
 let lastRecomputes = null, lastOwners = null;   // per cell, in the frame drawn before
+
+// The scene's lights (above) as MeshLambertMaterial applies them (three.js r170, linear
+// light): colour × (hemisphere(n) · 1.6 + sun · 1.8 · max(0, n·l)) / π, hemisphere(n) =
+// earth + (sky − earth)(n_y + 1)/2; LIGHT holds the constants per channel.
+const SKY = new THREE.Color(0xdde6ff), EARTH = new THREE.Color(0x30302a);
+const SUN = new THREE.Vector3(0.4, 1, 0.3).normalize();
+const byte = (x) => (x >= 1 ? 255 : x <= 0 ? 0 : (x * 255 + 0.5) | 0);
+
+// A box's 8 corners (±1) and 12 triangles, counter-clockwise seen from outside; each face's
+// two triangles end at the corner `face[f]` that stands for face f (faces ±x, ±y, ±z).
+function boxWithFaceCorners() {
+  const corners = [], axes = [[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]];
+  for (let k = 0; k < 8; k++) corners.push(k & 1 ? 1 : -1, k & 2 ? 1 : -1, k & 4 ? 1 : -1);
+  const on = (k, n) => n.every((x, i) => x === 0 || corners[k * 3 + i] === x);
+  const face = [];   // distinct corners, one per face (a matching: each corner is on 3 faces)
+  (function pick(f, used) {
+    if (f === 6) return true;
+    for (let k = 0; k < 8; k++) {
+      if (used & (1 << k) || !on(k, axes[f])) continue;
+      face[f] = k;
+      if (pick(f + 1, used | (1 << k))) return true;
+    }
+    return false;
+  })(0, 0);
+  const triangles = [];
+  axes.forEach((n, f) => {
+    // The face's corners around its normal, starting from face[f].
+    const ring = [0, 1, 2, 3, 4, 5, 6, 7].filter((k) => on(k, n));
+    const u = n[0] !== 0 ? 1 : 0, v = n[2] !== 0 ? 1 : 2;   // two axes in the face's plane
+    const angle = (k) => Math.atan2(corners[k * 3 + v], corners[k * 3 + u]);
+    ring.sort((a, b) => angle(a) - angle(b));
+    while (ring[0] !== face[f]) ring.push(ring.shift());
+    const [p, q, r, t] = ring;
+    const ccw = (a, b, c) => {   // (b − a) × (c − a) · n > 0
+      const A = [0, 1, 2].map((i) => corners[b * 3 + i] - corners[a * 3 + i]);
+      const B = [0, 1, 2].map((i) => corners[c * 3 + i] - corners[a * 3 + i]);
+      return (A[1] * B[2] - A[2] * B[1]) * n[0] + (A[2] * B[0] - A[0] * B[2]) * n[1] + (A[0] * B[1] - A[1] * B[0]) * n[2] > 0;
+    };
+    if (ccw(q, r, p)) triangles.push(q, r, p, r, t, p);
+    else triangles.push(t, r, p, r, q, p);
+  });
+  return { corners: new Float32Array(corners), vertices: 8, triangles, face };
+}
+
+// A shape's distinct corners and its triangles over them.
+function weld(geometry) {
+  const p = geometry.getAttribute('position'), corners = [], index = [], seen = new Map();
+  for (let i = 0; i < p.count; i++) {
+    const key = `${p.getX(i).toFixed(4)},${p.getY(i).toFixed(4)},${p.getZ(i).toFixed(4)}`;
+    let k = seen.get(key);
+    if (k === undefined) { k = corners.length / 3; seen.set(key, k); corners.push(p.getX(i), p.getY(i), p.getZ(i)); }
+    index.push(k);
+  }
+  const triangles = geometry.index ? Array.from(geometry.index.array, (i) => index[i]) : index;
+  geometry.dispose();
+  return { corners: new Float32Array(corners), vertices: corners.length / 3, triangles, face: null };
+}
 
 // World colours, made once per (world, asleep): a frame of 8,000 bodies allocates none.
 const colours = new Map();
@@ -52,20 +121,104 @@ function palette(world, worlds, asleep) {
   return c;
 }
 
-function instanced(geometry, capacity) {
-  const m = new THREE.InstancedMesh(geometry, bodyMaterial, capacity);
-  m.instanceMatrix.setUsage(THREE.DynamicDrawUsage);
-  m.setColorAt(0, new THREE.Color());
-  m.count = 0;
-  m.frustumCulled = false;
-  world3.add(m);
-  return m;
+// The bodies of one shape: capacity bodies, `count` drawn, slot k's vertices at k·vertices.
+class Bodies {
+  constructor(shape, material, capacity) {
+    const v = shape.vertices, t = shape.triangles;
+    this.shape = shape;
+    this.capacity = capacity;
+    this.count = 0;
+    this.ids = new Float64Array(capacity);          // slot -> body id
+    this.centres = new Float32Array(capacity * 3);  // slot -> position (picking, screenPointOf)
+    const geometry = new THREE.BufferGeometry();
+    const positions = new THREE.BufferAttribute(new Float32Array(capacity * v * 3), 3);
+    positions.setUsage(THREE.DynamicDrawUsage);
+    const colors = new THREE.BufferAttribute(new Uint8Array(capacity * v * 3), 3, true);
+    colors.setUsage(THREE.DynamicDrawUsage);
+    const index = new (capacity * v > 65535 ? Uint32Array : Uint16Array)(capacity * t.length);
+    for (let k = 0, at = 0; k < capacity; k++) for (const i of t) index[at++] = k * v + i;
+    geometry.setAttribute('position', positions);
+    geometry.setAttribute('color', colors);
+    geometry.setIndex(new THREE.BufferAttribute(index, 1));
+    geometry.setDrawRange(0, 0);
+    this.positions = positions; this.colors = colors;
+    this.mesh = new THREE.Mesh(geometry, material);
+    this.mesh.frustumCulled = false;
+    world3.add(this.mesh);
+  }
+  dispose() { world3.remove(this.mesh); this.mesh.geometry.dispose(); }
+  // Writes slot k: the shape scaled by (sx, sy, sz), rotated by (qx, qy, qz, qw), moved to
+  // (px, py, pz), coloured `colour` as lit.
+  place(k, px, py, pz, qx, qy, qz, qw, sx, sy, sz, colour) {
+    const x2 = qx + qx, y2 = qy + qy, z2 = qz + qz;
+    const xx = qx * x2, xy = qx * y2, xz = qx * z2, yy = qy * y2, yz = qy * z2, zz = qz * z2;
+    const wx = qw * x2, wy = qw * y2, wz = qw * z2;
+    // The rotation's columns: where the body's x, y and z axes point.
+    const r0 = 1 - (yy + zz), r1 = xy + wz, r2 = xz - wy;
+    const r4 = xy - wz, r5 = 1 - (xx + zz), r6 = yz + wx;
+    const r8 = xz + wy, r9 = yz - wx, r10 = 1 - (xx + yy);
+    const m0 = r0 * sx, m1 = r1 * sx, m2 = r2 * sx, m4 = r4 * sy, m5 = r5 * sy, m6 = r6 * sy;
+    const m8 = r8 * sz, m9 = r9 * sz, m10 = r10 * sz;
+    const c = this.shape.corners, out = this.positions.array, col = this.colors.array, n = this.shape.vertices;
+    for (let i = 0, o = k * n * 3; i < n * 3; i += 3, o += 3) {
+      const x = c[i], y = c[i + 1], z = c[i + 2];
+      out[o] = m0 * x + m4 * y + m8 * z + px;
+      out[o + 1] = m1 * x + m5 * y + m9 * z + py;
+      out[o + 2] = m2 * x + m6 * y + m10 * z + pz;
+    }
+    const face = this.shape.face, cr = colour.r, cg = colour.g, cb = colour.b;
+    if (face) {
+      // Face f's normal is ± a rotation column; its colour goes on its own corner.
+      for (let f = 0; f < 6; f++) {
+        const s = f & 1 ? -1 : 1, a = f >> 1;
+        const nx = s * (a === 0 ? r0 : a === 1 ? r4 : r8), ny = s * (a === 0 ? r1 : a === 1 ? r5 : r9), nz = s * (a === 0 ? r2 : a === 1 ? r6 : r10);
+        const w = 0.5 * ny + 0.5, d = Math.max(0, nx * SUN.x + ny * SUN.y + nz * SUN.z) * LIGHT.sun;
+        const o = (k * n + face[f]) * 3;
+        col[o] = byte(cr * (LIGHT.er + LIGHT.dr * w + d));
+        col[o + 1] = byte(cg * (LIGHT.eg + LIGHT.dg * w + d));
+        col[o + 2] = byte(cb * (LIGHT.eb + LIGHT.db * w + d));
+      }
+    } else {
+      for (let i = 0, o = k * n * 3; i < n * 3; i += 3, o += 3) {
+        const x = c[i], y = c[i + 1], z = c[i + 2];   // a unit sphere's corner is its normal
+        const nx = r0 * x + r4 * y + r8 * z, ny = r1 * x + r5 * y + r9 * z, nz = r2 * x + r6 * y + r10 * z;
+        const w = 0.5 * ny + 0.5, d = Math.max(0, nx * SUN.x + ny * SUN.y + nz * SUN.z) * LIGHT.sun;
+        col[o] = byte(cr * (LIGHT.er + LIGHT.dr * w + d));
+        col[o + 1] = byte(cg * (LIGHT.eg + LIGHT.dg * w + d));
+        col[o + 2] = byte(cb * (LIGHT.eb + LIGHT.db * w + d));
+      }
+    }
+    this.centres[k * 3] = px; this.centres[k * 3 + 1] = py; this.centres[k * 3 + 2] = pz;
+  }
+  // Draws the first `count` slots.
+  finish(count) {
+    const n = this.shape.vertices;
+    this.count = count;
+    this.mesh.geometry.setDrawRange(0, count * this.shape.triangles.length);
+    if (count > 0) {
+      for (const a of [this.positions, this.colors]) {
+        a.clearUpdateRanges();
+        a.addUpdateRange(0, count * n * 3);
+        a.needsUpdate = true;
+      }
+    }
+    this.mesh.geometry.boundingSphere = null;   // recomputed when picking
+  }
+  slotOf(id) {
+    for (let k = 0; k < this.count; k++) if (this.ids[k] === id) return k;
+    return -1;
+  }
 }
+const LIGHT = {
+  er: EARTH.r * 1.6 / Math.PI, eg: EARTH.g * 1.6 / Math.PI, eb: EARTH.b * 1.6 / Math.PI,
+  dr: (SKY.r - EARTH.r) * 1.6 / Math.PI, dg: (SKY.g - EARTH.g) * 1.6 / Math.PI, db: (SKY.b - EARTH.b) * 1.6 / Math.PI,
+  sun: 1.8 / Math.PI,
+};
 
-function ensureCapacity(mesh, geometry, n) {
-  if (mesh && mesh.instanceMatrix.count >= n) return mesh;
-  if (mesh) { world3.remove(mesh); mesh.dispose(); }
-  return instanced(geometry, Math.max(64, Math.ceil(n * 1.5)));
+function ensureCapacity(bodies, shape, material, n) {
+  if (bodies && bodies.capacity >= n) return bodies;
+  if (bodies) bodies.dispose();
+  return new Bodies(shape, material, Math.max(64, Math.ceil(n * 1.5)));
 }
 
 function setUpScene(s) {
@@ -80,8 +233,10 @@ function setUpScene(s) {
   domain.position.copy(centre);
   world3.add(domain);
   if (s.ground !== null && s.ground !== undefined) {
-    const g = new THREE.Mesh(new THREE.PlaneGeometry(size.x * 1.5, size.z * 1.5),
-      new THREE.MeshLambertMaterial({ color: 0x3b4550 }));
+    // Lit once: a plane's light is the same everywhere.
+    const lit = new THREE.Color(0x3b4550), up = 0.5 * 1 + 0.5, sun = SUN.y * LIGHT.sun;
+    lit.setRGB(lit.r * (LIGHT.er + LIGHT.dr * up + sun), lit.g * (LIGHT.eg + LIGHT.dg * up + sun), lit.b * (LIGHT.eb + LIGHT.db * up + sun));
+    const g = new THREE.Mesh(new THREE.PlaneGeometry(size.x * 1.5, size.z * 1.5), new THREE.MeshBasicMaterial({ color: lit }));
     g.rotation.x = -Math.PI / 2;
     g.position.set(centre.x, s.ground, centre.z);
     g.name = 'ground';
@@ -150,36 +305,37 @@ function decode(buffer) {
   return f;
 }
 
-const m4 = new THREE.Matrix4(), pos = new THREE.Vector3(), quat = new THREE.Quaternion(), scl = new THREE.Vector3();
+const m4 = new THREE.Matrix4();
 const white = new THREE.Color(0xffffff);
+let ids = new Float64Array(0);
 
+// Writes the frame's bodies straight from its bytes into the meshes' vertex arrays.
 function draw(f) {
-  const v = f.view;
-  let nb = 0, nl = 0;
-  for (let i = 0, at = f.bodyOffset; i < f.bodies; i++, at += BODY) if (v.getUint8(at + 10) === 1) nb++; else nl++;
-  boxes = ensureCapacity(boxes, boxGeometry, nb);
-  balls = ensureCapacity(balls, ballGeometry, nl);
-  boxIds = new Array(nb); ballIds = new Array(nl);
-  const ids = new Array(f.bodies);
-  let ib = 0, il = 0;
-  for (let i = 0, at = f.bodyOffset; i < f.bodies; i++, at += BODY) {
-    const id = v.getUint32(at + 4, true) * 4294967296 + v.getUint32(at, true);
+  const n = f.bodies;
+  const u8 = new Uint8Array(f.view.buffer, f.bodyOffset, n * BODY);
+  const u16 = new Uint16Array(f.view.buffer, f.bodyOffset, n * BODY / 2);
+  const u32 = new Uint32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
+  const f32 = new Float32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
+  let nb = 0;
+  for (let i = 0; i < n; i++) if (u8[i * BODY + 10] === 1) nb++;
+  boxes = ensureCapacity(boxes, boxShape, boxMaterial, nb);
+  balls = ensureCapacity(balls, ballShape, ballMaterial, n - nb);
+  if (ids.length !== n) ids = new Float64Array(n);
+  const next = [0, 0];
+  const selected = soda.selected;
+  for (let i = 0; i < n; i++) {
+    const w = i * (BODY / 4);
+    const id = u32[w + 1] * 4294967296 + u32[w];
     ids[i] = id;
-    const world = v.getUint16(at + 8, true), kind = v.getUint8(at + 10), asleep = v.getUint8(at + 11) === 1;
-    pos.set(v.getFloat32(at + 12, true), v.getFloat32(at + 16, true), v.getFloat32(at + 20, true));
-    quat.set(v.getFloat32(at + 24, true), v.getFloat32(at + 28, true), v.getFloat32(at + 32, true), v.getFloat32(at + 36, true));
-    scl.set(v.getFloat32(at + 40, true), v.getFloat32(at + 44, true), v.getFloat32(at + 48, true));
-    m4.compose(pos, quat, scl);
-    const colour = id === soda.selected ? white : palette(world, f.worlds, asleep);
-    if (kind === 1) { boxes.setMatrixAt(ib, m4); boxes.setColorAt(ib, colour); boxIds[ib++] = id; }
-    else { balls.setMatrixAt(il, m4); balls.setColorAt(il, colour); ballIds[il++] = id; }
+    const world = u16[w * 2 + 4], kind = u8[i * BODY + 10] === 1 ? 0 : 1, asleep = u8[i * BODY + 11] === 1;
+    const into = kind === 0 ? boxes : balls, k = next[kind]++;
+    into.ids[k] = id;
+    into.place(k, f32[w + 3], f32[w + 4], f32[w + 5], f32[w + 6], f32[w + 7], f32[w + 8], f32[w + 9],
+      f32[w + 10], f32[w + 11], f32[w + 12], id === selected ? white : palette(world, f.worlds, asleep));
   }
   soda.ids = ids;
-  for (const m of [boxes, balls]) {
-    m.count = m === boxes ? ib : il;
-    m.instanceMatrix.needsUpdate = true;
-    if (m.instanceColor) m.instanceColor.needsUpdate = true;
-  }
+  boxes.finish(next[0]);
+  balls.finish(next[1]);
   // A cell flashes when a rollback reached it since the frame drawn before: its count of
   // re-executed computations grew (a cell that changed owner restarts its count: no flash).
   if (lastRecomputes && lastRecomputes.length === f.cells) {
@@ -190,9 +346,15 @@ function draw(f) {
   lastRecomputes = f.recomputes.slice();
   lastOwners = f.owners.slice();
   drawFlashes();
-  drawPanel(f);
+  // The panel's text is rewritten about 8 times a second (every write costs the page a
+  // layout and a repaint), at once when the display pauses or resumes.
+  const was = soda.shown;
+  soda.shown = { step: f.step, hash: f.hash, gvt: f.gvt, buffered: f.buffered, paused: f.paused };
+  panelFrame = f;
+  if (!was || was.paused !== f.paused || f.paused) drawPanel();
   drawTimeline(f);
 }
+let panelFrame = null, panelAt = 0;
 
 function drawFlashes() {
   if (!flashMesh) return;
@@ -213,12 +375,16 @@ function drawFlashes() {
   if (flashMesh.instanceColor) flashMesh.instanceColor.needsUpdate = true;
 }
 
-function drawPanel(f) {
-  soda.shown = { step: f.step, hash: f.hash, gvt: f.gvt, buffered: f.buffered, paused: f.paused };
+function drawPanel() {
+  const f = panelFrame;
+  if (!f) return;
+  panelFrame = null;
+  panelAt = performance.now();
   $('step').textContent = f.step;
   $('hash').textContent = f.hash;
   $('gvt').textContent = soda.scene.worlds > 1 || soda.scene.executor !== 'reference' ? `${f.gvt} (${f.gvt - f.step} ahead)` : 'reference: none';
-  $('rate').textContent = `${f.rate.toFixed(1)} frames/s, page ${pageRate.toFixed(0)} fps (draw ${soda.drawMs.toFixed(1)} ms, render ${soda.renderMs.toFixed(1)} ms)`;
+  $('rate').textContent = `${f.rate.toFixed(1)} frames/s, page ${stats.pageFps.toFixed(0)} fps (draw ${soda.drawMs.toFixed(1)} ms, render ${soda.renderMs.toFixed(1)} ms)`;
+  $('scale').textContent = `${Math.round(stats.scale * 100)} % of ${stats.pixels}${stats.auto ? ', auto' : ', fixed'}`;
   const seconds = f.buffered / (soda.scene.fps * f.speed);
   $('buffer').textContent = `${f.buffered} frames, ${seconds.toFixed(2)} s`;
   $('starved').textContent = `${f.starved} ticks`;
@@ -233,7 +399,10 @@ const timeline = $('timeline');
 const rowFlash = [];
 function drawTimeline(f) {
   const ctx = timeline.getContext('2d');
-  const w = timeline.width = timeline.clientWidth, h = timeline.height = timeline.clientHeight;
+  // Resizing a canvas reallocates it: only when the page's size changed.
+  if (timeline.width !== timeline.clientWidth) timeline.width = timeline.clientWidth;
+  if (timeline.height !== timeline.clientHeight) timeline.height = timeline.clientHeight;
+  const w = timeline.width, h = timeline.height;
   ctx.fillStyle = '#0b0e11'; ctx.fillRect(0, 0, w, h);
   const ahead = Math.max(f.gvt, ...f.lvt) - f.step;
   const span = Math.max(8, ahead * 1.2, soda.scene.buffer * 1.1);
@@ -263,8 +432,12 @@ let lastTimeline = null;
 // --- connection -------------------------------------------------------------------------------
 function say(text) { $('message').textContent = text; }
 
+// The viewer to connect to: this page's server, or `?ws=HOST:PORT` (a copy of the page served
+// from elsewhere, as scripts/measure-view-fps.py does to measure a page without a rebuild).
+const wsHost = new URLSearchParams(location.search).get('ws') || location.host;
+
 function connect() {
-  const socket = new WebSocket(`ws://${location.host}/ws`);
+  const socket = new WebSocket(`ws://${wsHost}/ws`);
   socket.binaryType = 'arraybuffer';
   soda.socket = socket;
   socket.onmessage = (e) => {
@@ -302,14 +475,15 @@ function pick(event) {
   const r = renderer.domElement.getBoundingClientRect();
   pointer.set(((event.clientX - r.left) / r.width) * 2 - 1, -((event.clientY - r.top) / r.height) * 2 + 1);
   raycaster.setFromCamera(pointer, camera);
-  const targets = [boxes, balls].filter(Boolean);
+  const shapes = [boxes, balls].filter((b) => b && b.count > 0);
+  for (const b of shapes) if (!b.mesh.geometry.boundingSphere) b.mesh.geometry.computeBoundingSphere();
+  const targets = shapes.map((b) => b.mesh);
   const ground = world3.getObjectByName('ground');
   if (ground) targets.push(ground);
   const hit = raycaster.intersectObjects(targets, false)[0];
   if (!hit) return { ray: raycaster.ray.direction.clone() };
-  let id = null;
-  if (hit.object === boxes) id = boxIds[hit.instanceId];
-  else if (hit.object === balls) id = ballIds[hit.instanceId];
+  const body = shapes.find((b) => b.mesh === hit.object);
+  const id = body ? body.ids[Math.floor(hit.face.a / body.shape.vertices)] : null;
   return { id, point: hit.point, ray: raycaster.ray.direction.clone() };
 }
 let down = null;
@@ -339,12 +513,10 @@ window.addEventListener('keydown', (e) => {
 
 // Where body `id` appears on the page, in CSS pixels (for tests and scripted demos).
 soda.screenPointOf = (id) => {
-  for (const [mesh, ids] of [[boxes, boxIds], [balls, ballIds]]) {
-    if (!mesh) continue;
-    const k = ids.indexOf(id);
+  for (const b of [boxes, balls]) {
+    const k = b ? b.slotOf(id) : -1;
     if (k < 0) continue;
-    mesh.getMatrixAt(k, m4);
-    const p = new THREE.Vector3().setFromMatrixPosition(m4).project(camera);
+    const p = new THREE.Vector3().fromArray(b.centres, k * 3).project(camera);
     const r = renderer.domElement.getBoundingClientRect();
     return { x: r.left + (p.x + 1) / 2 * r.width, y: r.top + (1 - p.y) / 2 * r.height, depth: p.z };
   }
@@ -352,28 +524,74 @@ soda.screenPointOf = (id) => {
 };
 
 // --- render loop ------------------------------------------------------------------------------
-let pageRate = 0, lastTime = performance.now();
+// The page draws when a new frame came, the camera moved, a flash fades or the page was
+// resized, not on every animation frame. Its own cost is in window.sodaStats: animation
+// frames per second, frames drawn per second, decode + instancing and render ms per frame
+// (averages), and the render scale: the canvas has scale × the CSS pixels. With `auto`
+// (the default; `?scale=0.5` fixes it), the scale drops a step each second the page draws
+// fewer than 55 frames/s while frames keep coming, down to 25 %, and climbs back a step after
+// 3 s at 58 or more — the panel shows it.
+const fixedScale = Number(new URLSearchParams(location.search).get('scale'));
+const stats = {
+  pageFps: 0, drawnFps: 0, drawMs: 0, renderMs: 0,
+  scale: fixedScale > 0 ? Math.min(1, fixedScale) : 1, auto: !(fixedScale > 0), pixels: '',
+  ticks: 0, renders: 0, windowStart: performance.now(), fast: 0,
+};
+window.sodaStats = stats;
+const SCALES = [1, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25];
+let needRender = true;
 function resize() {
   const w = host.clientWidth, h = host.clientHeight;
+  renderer.setPixelRatio(Math.min(1, window.devicePixelRatio) * stats.scale);
   renderer.setSize(w, h, false);
   renderer.domElement.style.width = `${w}px`; renderer.domElement.style.height = `${h}px`;
   camera.aspect = w / Math.max(1, h); camera.updateProjectionMatrix();
+  stats.pixels = `${w}×${h}`;
+  needRender = true;
 }
 window.addEventListener('resize', resize);
+controls.addEventListener('change', () => { needRender = true; });
 resize();
+function adapt(now) {
+  const seconds = (now - stats.windowStart) / 1000;
+  if (seconds < 1) return;
+  stats.pageFps = stats.ticks / seconds;
+  stats.drawnFps = stats.renders / seconds;
+  // Busy: the page drew on (nearly) every animation frame, so frames wait for it.
+  const busy = stats.renders >= stats.ticks * 0.9 && stats.renders > 0;
+  if (stats.auto && busy) {
+    const at = SCALES.indexOf(stats.scale);
+    if (stats.pageFps < 55 && at < SCALES.length - 1) { stats.scale = SCALES[at + 1]; stats.fast = 0; resize(); }
+    else if (stats.pageFps >= 58 && at > 0 && ++stats.fast >= 3) { stats.scale = SCALES[at - 1]; stats.fast = 0; resize(); }
+  } else if (stats.auto && stats.pageFps >= 58 && stats.scale < 1 && ++stats.fast >= 3) {
+    stats.scale = SCALES[SCALES.indexOf(stats.scale) - 1]; stats.fast = 0; resize();
+  }
+  stats.ticks = 0; stats.renders = 0; stats.windowStart = now;
+  if (!panelFrame && soda.shown) panelFrame = lastFrame;
+}
+let lastFrame = null;
 function loop(now) {
-  const dt = now - lastTime; lastTime = now;
-  pageRate = pageRate * 0.9 + (dt > 0 ? 1000 / dt : 0) * 0.1;
+  stats.ticks++;
   if (pending && soda.scene) {
     const t0 = performance.now();
     draw(pending);
+    lastFrame = pending;
     pending = null;
     soda.drawMs = soda.drawMs * 0.9 + (performance.now() - t0) * 0.1;
+    needRender = true;
   }
-  controls.update();
-  const r0 = performance.now();
-  renderer.render(world3, camera);
-  soda.renderMs = soda.renderMs * 0.9 + (performance.now() - r0) * 0.1;
+  if (controls.update()) needRender = true;
+  if (flash.size > 0 && !needRender) { drawFlashes(); needRender = true; }
+  if (needRender) {
+    needRender = false;
+    const r0 = performance.now();
+    renderer.render(world3, camera);
+    soda.renderMs = soda.renderMs * 0.9 + (performance.now() - r0) * 0.1;
+    stats.renders++;
+  }
+  stats.drawMs = soda.drawMs; stats.renderMs = soda.renderMs;
+  if (panelFrame && now - panelAt > 125) drawPanel();
+  adapt(now);
   requestAnimationFrame(loop);
 }
 requestAnimationFrame(loop);

@@ -1,0 +1,328 @@
+#!/usr/bin/env python3
+"""How fast the `soda view` page plays in headless Chromium (software GL, SwiftShader).
+
+Starts `soda view --port 0 ARGS`, opens the page in headless Chromium through ChromeDriver
+at a fixed window size, lets it warm up, then for --seconds counts on the page itself:
+  page fps   requestAnimationFrame callbacks per second (the page's display rate);
+  shown fps  distinct simulation frames drawn per second (window.soda.shown.step changing);
+and reads the page's own per-frame costs (window.soda.drawMs: decode + instancing,
+window.soda.renderMs: three.js render call; exponential averages), its render scale if it
+has one (window.sodaStats), Chromium's renderer-process task/script time (CDP
+Performance.getMetrics) and the CPU time of soda and of Chromium's processes (/proc).
+
+The counters are installed by this script, not taken from the page, so pages of any version
+are measured the same way. Several --runs alternate between the binaries given (A/B/A/B...),
+and the medians are printed per binary. Needs python3 (standard library only), Debian's
+`chromium` and `chromium-driver` (scripts/install-browser-test-deps.sh).
+
+  scripts/measure-view-fps.py --soda target/release/soda --runs 3
+  scripts/measure-view-fps.py --soda /tmp/old/soda --soda target/release/soda --runs 3
+  scripts/measure-view-fps.py --query scale=1 --query scale=auto   # the page's render scale
+  scripts/measure-view-fps.py --page web   # this checkout's page, without rebuilding soda
+  scripts/measure-view-fps.py --floor 'n=0' --floor 'n=8000&mode=points' --runs 2   # three.js alone
+
+Use it on an otherwise idle machine if you can: the page, Chromium's software GL and the
+simulation share its cores, and other work moves the numbers by a factor of two.
+"""
+
+import argparse
+import base64
+import json
+import os
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import time
+import urllib.request
+
+CHROME_ARGS = [
+    "--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist",
+]
+
+# Installed in the page: counts animation frames and distinct frames shown.
+COUNTERS = """
+const c = window.__measure = { raf: 0, shown: 0, last: null, t0: performance.now(), gaps: [] };
+let prev = performance.now();
+function tick(now) {
+  c.raf++;
+  c.gaps.push(now - prev); prev = now;
+  const s = window.soda && window.soda.shown ? window.soda.shown.step : null;
+  if (s !== null && s !== c.last) { c.shown++; c.last = s; }
+  requestAnimationFrame(tick);
+}
+requestAnimationFrame(tick);
+return true;
+"""
+
+READ = """
+const c = window.__measure, s = window.soda, now = performance.now();
+const gaps = c.gaps.slice().sort((a, b) => a - b);
+return { seconds: (now - c.t0) / 1000, raf: c.raf, shown: c.shown,
+         gap_p50: gaps[Math.floor(gaps.length * 0.5)] || 0,
+         gap_p95: gaps[Math.floor(gaps.length * 0.95)] || 0,
+         draw_ms: s.drawMs, render_ms: s.renderMs, frames_received: s.frames,
+         step: s.shown ? s.shown.step : null, buffered: s.shown ? s.shown.buffered : null,
+         stats: window.sodaStats ? JSON.parse(JSON.stringify(window.sodaStats)) : null,
+         canvas: [document.querySelector('canvas').width, document.querySelector('canvas').height],
+         dpr: window.devicePixelRatio, gl: window.__gl || null };
+"""
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def request(method, url, body=None):
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(url, data=data, method=method,
+                                 headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=120) as r:
+            return json.loads(r.read() or b"null")
+    except urllib.error.HTTPError as e:
+        raise RuntimeError(f"WebDriver {method} {url}: {e.read().decode()}") from None
+
+
+def descendants(pid):
+    """pid and all its descendants (from /proc)."""
+    children = {}
+    for p in os.listdir("/proc"):
+        if not p.isdigit():
+            continue
+        try:
+            with open(f"/proc/{p}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+        except OSError:
+            continue
+        children.setdefault(ppid, []).append(int(p))
+    out, todo = [], [pid]
+    while todo:
+        q = todo.pop()
+        out.append(q)
+        todo.extend(children.get(q, []))
+    return out
+
+
+def cpu_seconds(pids):
+    """User + system CPU seconds of each process, by its command name."""
+    tick = os.sysconf("SC_CLK_TCK")
+    by = {}
+    for p in pids:
+        try:
+            with open(f"/proc/{p}/stat") as f:
+                stat = f.read()
+            with open(f"/proc/{p}/cmdline") as f:
+                cmd = f.read().split("\0")
+            if len(cmd) <= 2:   # Chromium rewrites its command line as one string
+                cmd = cmd[0].split()
+        except OSError:
+            continue
+        fields = stat.rsplit(")", 1)[1].split()
+        t = (int(fields[11]) + int(fields[12])) / tick
+        kind = next((a.split("=", 1)[1] for a in cmd if a.startswith("--type=")), None)
+        name = os.path.basename(cmd[0]) + (f":{kind}" if kind else "")
+        by[name] = by.get(name, 0.0) + t
+    return by
+
+
+def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query=""):
+    viewer = subprocess.Popen([soda, "view", "--port", "0", *view_args],
+                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    driver = static = None
+    try:
+        first = viewer.stdout.readline()
+        if "http://" not in first:
+            raise RuntimeError(f"soda view printed no address: {first!r}")
+        url = "http://" + first.split("http://", 1)[1].split("/", 1)[0] + "/"
+        if page:
+            # The page's files from a directory, connected to this viewer's WebSocket.
+            ws = url[len("http://"):-1]
+            pport = free_port()
+            static = subprocess.Popen([sys.executable, "-m", "http.server", "--bind", "127.0.0.1",
+                                       str(pport), "--directory", page],
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            time.sleep(0.5)
+            url = f"http://127.0.0.1:{pport}/?ws={ws}"
+        if query:
+            url += ("&" if "?" in url else "?") + query
+        port = free_port()
+        driver = subprocess.Popen(["chromedriver", f"--port={port}"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        base = f"http://127.0.0.1:{port}"
+        deadline = time.time() + 20
+        while True:
+            try:
+                request("GET", base + "/status")
+                break
+            except OSError:
+                if time.time() > deadline:
+                    raise
+                time.sleep(0.1)
+        caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
+            "binary": "/usr/bin/chromium",
+            "args": CHROME_ARGS + [f"--window-size={size}"]}}}}
+        session = request("POST", base + "/session", caps)["value"]["sessionId"]
+        s = f"{base}/session/{session}"
+        js = lambda script: request("POST", s + "/execute/sync", {"script": script, "args": []})["value"]
+        cdp = lambda cmd, params: request("POST", s + "/goog/cdp/execute", {"cmd": cmd, "params": params})["value"]
+        w, h = (int(x) for x in size.split(","))
+        cdp("Emulation.setDeviceMetricsOverride",
+            {"width": w, "height": h, "deviceScaleFactor": 1, "mobile": False})
+        request("POST", s + "/url", {"url": url})
+        deadline = time.time() + 60
+        while not js("return !!(window.soda && window.soda.frames > 10)"):
+            if time.time() > deadline:
+                raise RuntimeError("no frames on the page within 60 s")
+            time.sleep(0.2)
+        time.sleep(warmup)
+        cdp("Performance.enable", {})
+        m0 = {m["name"]: m["value"] for m in cdp("Performance.getMetrics", {})["metrics"]}
+        pids = [viewer.pid] + descendants(driver.pid)
+        c0 = cpu_seconds(pids)
+        load0 = os.getloadavg()[0]
+        js(COUNTERS)
+        time.sleep(seconds)
+        r = js(READ)
+        load1 = os.getloadavg()[0]
+        c1 = cpu_seconds(pids)
+        m1 = {m["name"]: m["value"] for m in cdp("Performance.getMetrics", {})["metrics"]}
+        if screenshot:
+            png = request("GET", s + "/screenshot")["value"]
+            with open(screenshot, "wb") as f:
+                f.write(base64.b64decode(png))
+        request("DELETE", s)
+    finally:
+        if static:
+            static.kill()
+            static.wait()
+        if driver:
+            driver.kill()
+            driver.wait()
+        viewer.send_signal(signal.SIGINT)
+        try:
+            viewer.wait(10)
+        except subprocess.TimeoutExpired:
+            viewer.kill()
+            viewer.wait()
+    wall = r["seconds"]
+    cpu = {k: round((c1.get(k, 0) - c0.get(k, 0)) / wall, 2) for k in c1}
+    return {
+        "page_fps": round(r["raf"] / wall, 1),
+        "shown_fps": round(r["shown"] / wall, 1),
+        "gap_ms_p50": round(r["gap_p50"], 1),
+        "gap_ms_p95": round(r["gap_p95"], 1),
+        "draw_ms": round(r["draw_ms"], 2),
+        "render_ms": round(r["render_ms"], 2),
+        "renderer_task_s_per_s": round((m1["TaskDuration"] - m0["TaskDuration"]) / wall, 2),
+        "renderer_script_s_per_s": round((m1["ScriptDuration"] - m0["ScriptDuration"]) / wall, 2),
+        "cpu_per_process": {k: v for k, v in sorted(cpu.items()) if v >= 0.01},
+        "loadavg": [round(load0, 1), round(load1, 1)],   # 1-minute load, this run's own included
+        "canvas": r["canvas"],
+        "scale": (r["stats"] or {}).get("scale", 1),
+        "stats": r["stats"],
+        "buffered": r["buffered"],
+        "gl": r["gl"],
+    }
+
+
+def floor(query, seconds, warmup, size):
+    """scripts/view-floor.html?QUERY (three.js alone) in the same browser set-up: page fps."""
+    import shutil
+    import tempfile
+    here = os.path.dirname(os.path.abspath(__file__))
+    with tempfile.TemporaryDirectory() as d:
+        shutil.copy(os.path.join(here, "view-floor.html"), os.path.join(d, "index.html"))
+        os.symlink(os.path.join(here, "..", "web", "vendor"), os.path.join(d, "vendor"))
+        pport, port = free_port(), free_port()
+        static = subprocess.Popen([sys.executable, "-m", "http.server", "--bind", "127.0.0.1",
+                                   str(pport), "--directory", d],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        driver = subprocess.Popen(["chromedriver", f"--port={port}"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            base = f"http://127.0.0.1:{port}"
+            deadline = time.time() + 20
+            while True:
+                try:
+                    request("GET", base + "/status")
+                    break
+                except OSError:
+                    if time.time() > deadline:
+                        raise
+                    time.sleep(0.1)
+            caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
+                "binary": "/usr/bin/chromium", "args": CHROME_ARGS + [f"--window-size={size}"]}}}}
+            s = base + "/session/" + request("POST", base + "/session", caps)["value"]["sessionId"]
+            js = lambda script: request("POST", s + "/execute/sync", {"script": script, "args": []})["value"]
+            w, h = (int(x) for x in size.split(","))
+            request("POST", s + "/goog/cdp/execute", {"cmd": "Emulation.setDeviceMetricsOverride", "params": {
+                "width": w, "height": h, "deviceScaleFactor": 1, "mobile": False}})
+            request("POST", s + "/url", {"url": f"http://127.0.0.1:{pport}/index.html?{query}"})
+            time.sleep(warmup)
+            js(COUNTERS)
+            time.sleep(seconds)
+            r = js(READ)
+            request("DELETE", s)
+        finally:
+            driver.kill()
+            driver.wait()
+            static.kill()
+            static.wait()
+    return {"page_fps": round(r["raf"] / r["seconds"], 1), "update_ms": round(r["draw_ms"], 2),
+            "render_ms": round(r["render_ms"], 2)}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--soda", action="append", help="soda binary (repeat to compare; runs alternate)")
+    ap.add_argument("--page", action="append",
+                    help="serve the page from this directory instead of the binary's own "
+                         "(the page must take ?ws=HOST:PORT); repeat to compare pages")
+    ap.add_argument("--runs", type=int, default=3, help="runs per binary")
+    ap.add_argument("--seconds", type=float, default=20)
+    ap.add_argument("--warmup", type=float, default=5)
+    ap.add_argument("--window-size", default="1280,720")
+    ap.add_argument("--query", action="append",
+                    help="add this query to the page's address (e.g. scale=1); repeat to compare")
+    ap.add_argument("--floor", action="append",
+                    help="instead of soda view, measure scripts/view-floor.html?FLOOR (three.js "
+                         "alone: e.g. n=8000&mode=points); repeat to compare")
+    ap.add_argument("--screenshot", help="save a screenshot of each run's page as PREFIX-N.png")
+    ap.add_argument("view_args", nargs="*",
+                    default=["--objects", "8000", "--threads", "2", "--worlds", "8"],
+                    help="soda view options (after --)")
+    a = ap.parse_args()
+    if a.floor:
+        print(f"# scripts/view-floor.html, {a.seconds:g} s after {a.warmup:g} s, window {a.window_size}; "
+              f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
+        for run in range(a.runs):
+            for q in a.floor:
+                print(json.dumps({"floor": q, "run": run + 1, **floor(q, a.seconds, a.warmup, a.window_size)}), flush=True)
+        return 0
+    binaries = a.soda or ["target/release/soda"]
+    pages = a.page or [None]
+    queries = a.query or [""]
+    variants = [(b, p, q) for b in binaries for p in pages for q in queries]
+    print(f"# soda view {' '.join(a.view_args)}; {a.seconds:g} s measured after {a.warmup:g} s, "
+          f"window {a.window_size}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
+    results = {v: [] for v in variants}
+    for run in range(a.runs):
+        for i, (b, p, q) in enumerate(variants):
+            shot = f"{a.screenshot}-{run + 1}-{i}.png" if a.screenshot else None
+            r = measure(b, a.view_args, a.seconds, a.warmup, a.window_size, p, shot, q)
+            results[(b, p, q)].append(r)
+            print(json.dumps({"soda": b, "page": p, "query": q, "run": run + 1, **r}), flush=True)
+    keys = ["page_fps", "shown_fps", "gap_ms_p50", "gap_ms_p95", "draw_ms", "render_ms",
+            "renderer_task_s_per_s", "scale"]
+    print("# medians: " + ", ".join(keys))
+    for (b, p, q), rs in results.items():
+        print(f"{b}{' page ' + p if p else ''}{' ?' + q if q else ''}: " + ", ".join(f"{k} {statistics.median(r[k] for r in rs):g}" for k in keys))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
