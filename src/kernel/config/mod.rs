@@ -89,8 +89,9 @@ pub struct KernelConfig {
     /// uncommitted states (no world computes past GVT + W − 1).
     pub window: u64,
     /// Adaptive optimism (SPEC.md §K14): each world throttles its own window within
-    /// `1..=window` by its recent rollbacks (halved at a rollback, one wider at each GVT
-    /// advance it saw without one). Off: every world uses `window`. Only how far worlds
+    /// `1..=window` by its recent rollback rate (halved above 10 % over an epoch of 8 GVT
+    /// advances; one step wider on trial below 2 %, given up at the first extra rollback,
+    /// with an exponential back-off). Off: every world uses `window`. Only how far worlds
     /// speculate changes, never the committed bits.
     #[serde(default)]
     pub window_auto: bool,
