@@ -219,6 +219,7 @@ proptest! {
         // shapes to, plus half a second: the collision must happen.
         let closing = ra + rb + 0.6 - a.inner_radius() - b.inner_radius();
         let steps = (closing / ((speed_a + speed_b) * scene.dt)).ceil() as u32 + 30;
+        let max_speed = scene.solver.max_speed;
         let h = history(scene, steps.max(90));
         let (first, last) = (&h[0], &h[h.len() - 1]);
         prop_assert_eq!(last.len(), 2);
@@ -229,6 +230,11 @@ proptest! {
         let scale = h.iter().map(|s| momentum_scale(s)).fold(0.0f64, f64::max);
         let p0 = momentum(first);
         for (step, s) in h.iter().enumerate() {
+            // The speed cap (SPEC.md §3, a `speed-capped` event) takes momentum by design: a
+            // body knocked downwards reaches it while falling on after the collision.
+            if s.iter().any(|b| b.linvel.norm() >= 0.999 * max_speed) {
+                break;
+            }
             let expected = [p0[0], p0[1] + mass * g as f64 * dt * step as f64, p0[2]];
             let err = distance(momentum(s), expected);
             prop_assert!(
