@@ -125,10 +125,7 @@ impl RigidBodyModel {
                 // a partner `own` rests on is immovable.
                 Some(lower) if lower == own.body.id => {
                     if self.is_asleep(j) {
-                        let mut set = view(own.body, j, &m);
-                        set.restitution = 0.0;
-                        set.shared = true;
-                        sets.push(set);
+                        sets.push(pile_contact(own.body, j, &m));
                     }
                 }
                 Some(_) => {
@@ -146,10 +143,7 @@ impl RigidBodyModel {
                         // share it (SPEC.md §5.3). It does not bounce. Kept when both bodies
                         // sleep: it only moves `own`, and a sleeping body that something woke
                         // must not roll into a sleeping neighbour.
-                        let mut set = view(own.body, j, &m);
-                        set.restitution = 0.0;
-                        set.shared = true;
-                        sets.push(set);
+                        sets.push(pile_contact(own.body, j, &m));
                     } else if self.is_asleep(a) && self.is_asleep(b) {
                         // Two sleeping bodies form no pair: a frozen body must not be moved.
                     } else {
@@ -535,6 +529,16 @@ impl<'a> Candidate<'a> {
         let limit = self.half_box() + other.half_box();
         (0..3).all(|k| d[k] <= limit[k] + distance)
     }
+}
+
+/// Body `i`'s contact set for a pile contact with `j` (SPEC.md §5.3): the partner's inverse
+/// mass, restitution 0 (a resting contact does not bounce), and a position correction added
+/// whole.
+fn pile_contact(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
+    let mut set = view(i, j, m);
+    set.restitution = 0.0;
+    set.shared = true;
+    set
 }
 
 /// The pair in canonical order: lower id first.
