@@ -138,7 +138,7 @@ impl RigidBodyModel {
                 }
                 None => {
                     let contact = self.pair_contact(a, b, &m);
-                    if self.in_pile(a, b, &contact) {
+                    if self.in_pile(a, b, contact.edge(self.rest_speed())) {
                         // A resting contact in a supported pile: both bodies' own solves
                         // share it (SPEC.md §5.3). It does not bounce. Kept when both bodies
                         // sleep: it only moves `own`, and a sleeping body that something woke
@@ -322,10 +322,11 @@ impl RigidBodyModel {
     /// approach that never turned into motion, and ball piles never came to rest. Two bodies
     /// in flight (both at depth 0) and every impact stay pairs, whose momentum is exact. A
     /// pure function of the pair's step-`t` states, so both bodies classify it alike.
-    fn in_pile(&self, a: &Body, b: &Body, contact: &PairContact) -> bool {
+    /// `edge`: the pair's [`PairContact::edge`] at the resting speed.
+    fn in_pile(&self, a: &Body, b: &Body, edge: Option<Edge>) -> bool {
         !self.matched()
             && (a.support_depth > 0 || b.support_depth > 0)
-            && !contact.edge(self.rest_speed()).is_some_and(|e| e.impact)
+            && !edge.is_some_and(|e| e.impact)
     }
 
     /// Whether a deferred impact is only projected (without gravity, SPEC.md §5.3): it keeps
@@ -363,11 +364,11 @@ impl RigidBodyModel {
         if self.support(a, b, &m).is_some() {
             return None;
         }
-        let contact = self.pair_contact(a, b, &m);
-        if self.in_pile(a, b, &contact) {
+        let edge = self.pair_contact(a, b, &m).edge(self.rest_speed());
+        if self.in_pile(a, b, edge) {
             return None;
         }
-        contact.edge(self.rest_speed())
+        edge
     }
 
     /// What `own`'s pair with `entry` (closing, as `edge`) meets among the closing symmetric
