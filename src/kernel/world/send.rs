@@ -17,13 +17,15 @@ impl<M: CellModel> World<M> {
     /// mode always (an empty content is a null message); otherwise lazily — nothing if the
     /// live version sent before has the same content and flag (or there is none and
     /// `content` is `None`), else an anti-message for it (if any) and the new version (if
-    /// any).
+    /// any). `homed`: the copy of a state content's bodies with their cell that a message
+    /// carries, built on first use and shared by every destination of one ghost.
     pub(super) fn send(
         &mut self,
         step: Step,
         key: SentKey,
         content: Option<Live<M::State>>,
         follows: bool,
+        homed: &mut Option<Bodies<M::State>>,
         out: &mut Vec<Message<M::State>>,
     ) {
         let SentKey {
@@ -77,32 +79,33 @@ impl<M: CellModel> World<M> {
         if let Some(content) = content {
             entry.seq += 1;
             entry.follows = follows;
-            // A ghost's message carries a copy of the state with its cell; the log keeps the
-            // state itself (shared with the cell's log).
-            // (and, within a process, the state itself for the receiver's view).
+            // A ghost's message carries a copy of the state with its cell (one copy for all
+            // its destinations) and, within a process, the state itself for the receiver's
+            // view; the log keeps the state (shared with the cell's log).
             let (bodies, shared): (Bodies<M::State>, _) = match &content {
                 Live::Bodies(b) => (b.clone(), None),
-                Live::State(st) => (
-                    Arc::new(
-                        view(st)
-                            .iter()
-                            .map(|b| Homed {
-                                cell,
-                                state: b.clone(),
-                            })
-                            .collect(),
-                    ),
-                    st.clone(),
-                ),
+                Live::State(st) => {
+                    let copy = homed.get_or_insert_with(|| {
+                        Arc::new(
+                            view(st)
+                                .iter()
+                                .map(|b| Homed {
+                                    cell,
+                                    state: b.clone(),
+                                })
+                                .collect(),
+                        )
+                    });
+                    (copy.clone(), st.clone())
+                }
             };
             entry.live = Some(content);
-            let content = bodies;
             // Null messages are conservative mode's; an empty delta ghost (a border cell that
             // emptied) is news, counted as a ghost only.
-            if conservative && content.is_empty() {
+            if conservative && bodies.is_empty() {
                 self.counters.null_messages_sent += 1;
             }
-            out.push(msg(Sign::Positive, entry.seq, content, shared));
+            out.push(msg(Sign::Positive, entry.seq, bodies, shared));
             self.counters.messages_sent += 1;
             match kind {
                 MessageKind::Ghost => self.counters.ghosts_sent += 1,
@@ -161,6 +164,7 @@ impl<M: CellModel> World<M> {
             (now || (t > self.origin && self.changed(x, t - 1)), now)
         };
         let content = send.then(|| Live::State(self.slots[self.si(t)].states[x].clone()));
+        let mut homed = None;
         for k in 0..self.targets[x].len() {
             let w = self.targets[x][k];
             let key = SentKey {
@@ -168,7 +172,7 @@ impl<M: CellModel> World<M> {
                 src_cell: cell,
                 dst_world: w,
             };
-            self.send(t, key, content.clone(), follows, out);
+            self.send(t, key, content.clone(), follows, &mut homed, out);
         }
     }
 
@@ -201,7 +205,7 @@ impl<M: CellModel> World<M> {
             src_cell: self.cells[x],
             dst_world: w,
         };
-        self.send(s + 1, key, content, false, out);
+        self.send(s + 1, key, content, false, &mut None, out);
     }
 
     /// Sends the ghosts due (`ghost_due`) in (step, cell) order: at the end of an action, so a
