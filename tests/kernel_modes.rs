@@ -65,6 +65,32 @@ fn an_adaptive_window_commits_the_reference_bits_and_wastes_less_than_its_ceilin
     );
 }
 
+/// Balancing rounds rebuild a world's territory (K13) while its window adapts (K14): the
+/// world keeps its window and throttle across the rebuild, and the committed bits stay the
+/// reference's.
+#[test]
+fn an_adaptive_window_across_balancing_rounds_commits_the_reference_bits() {
+    let s = builtin("falling-cubes", Some(200), 2).unwrap();
+    let (m, g, b) = (s.model(), s.grid(), s.initial_bodies());
+    let exp = reference(&m, &g, &b, 80);
+    for seed in 0..3 {
+        let balance = soda::kernel::BalanceConfig {
+            period: 10,
+            backoff: false,
+            load: soda::kernel::LoadSource::Seeded(seed),
+            seed,
+            ..soda::kernel::BalanceConfig::on()
+        };
+        let cfg = KernelConfig::new(6)
+            .window(64)
+            .window_auto(true)
+            .balance(balance);
+        let run = compare(&m, &g, &b, &cfg, &VirtualOptions::seeded(seed), &exp)
+            .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        assert!(run.balance.rounds > 0, "seed {seed}: no balancing round");
+    }
+}
+
 #[test]
 fn cell_recomputes_fewer_cell_steps_than_world_on_the_same_schedules_of_sparse_gas() {
     let s = builtin("sparse-gas", Some(64), 1).unwrap();

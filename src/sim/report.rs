@@ -98,10 +98,6 @@ impl KernelReport {
     /// The run's window as the command lines write it: `16`, or `auto:64` when each world
     /// adapted its own (SPEC.md §K14).
     pub fn window_spec(&self) -> crate::kernel::WindowSpec {
-        if self.window_auto {
-            crate::kernel::WindowSpec::Auto(self.window)
-        } else {
-            crate::kernel::WindowSpec::Fixed(self.window)
-        }
+        crate::kernel::WindowSpec::new(self.window, self.window_auto)
     }
 }

@@ -32,13 +32,18 @@ impl WindowSpec {
             .window_auto(matches!(self, WindowSpec::Auto(_)))
     }
 
+    /// The window `window` (steps; the ceiling if `auto`), adaptive or fixed.
+    pub fn new(window: u64, auto: bool) -> WindowSpec {
+        if auto {
+            WindowSpec::Auto(window)
+        } else {
+            WindowSpec::Fixed(window)
+        }
+    }
+
     /// The window of `config`.
     pub fn of(config: &KernelConfig) -> WindowSpec {
-        if config.window_auto {
-            WindowSpec::Auto(config.window)
-        } else {
-            WindowSpec::Fixed(config.window)
-        }
+        WindowSpec::new(config.window, config.window_auto)
     }
 }
 

@@ -153,7 +153,7 @@ impl<M: CellModel> World<M> {
     /// `step` would hold them: the final state of a cell is its whole log at GVT, and it
     /// moves with the cell. Speculative states, messages, dirty steps and the inbox are
     /// dropped; [`World::start`] then sends the ghosts of `step` under the new owner map.
-    /// Counters and the trace carry on; the end is reset to `step` (raise it with
+    /// Counters, the trace and the (adaptive) window carry on; the end is reset to `step` (raise it with
     /// [`World::set_end`]).
     pub fn reterritory(&mut self, part: Arc<Partition>, states: &CellStates<M::State>, step: Step) {
         let config = KernelConfig {
@@ -175,6 +175,9 @@ impl<M: CellModel> World<M> {
         );
         fresh.counters = std::mem::take(&mut self.counters);
         fresh.record = self.record.take();
+        // The adaptive window carries on with the counters its epochs are measured against.
+        fresh.window = self.window;
+        fresh.throttle = self.throttle.take();
         for (x, &c) in fresh.cells.enumerate() {
             if let Ok(old) = self.cells.as_slice().binary_search(&c) {
                 fresh.recomputes[x] = self.recomputes.as_slice()[old];
@@ -359,8 +362,14 @@ impl<M: CellModel> World<M> {
             // wider window (a new GVT) can unblock a cell.
             self.idle_at != Some(gvt) && lvt < self.end && lvt + 1 < gvt + self.window
         } else {
-            !self.dirty.is_empty() || (self.head < self.end && self.head + 1 < gvt + self.window)
+            !self.dirty.is_empty() || self.may_advance(gvt)
         }
+    }
+
+    /// Whether an optimistic world may compute its next step at GVT `gvt`: it has one left
+    /// and its window allows it (no world computes past GVT + W − 1, K3).
+    fn may_advance(&self, gvt: Step) -> bool {
+        self.head < self.end && self.head + 1 < gvt + self.window
     }
 
     /// One action: apply the whole inbox in key order if it is not empty; otherwise
@@ -378,8 +387,9 @@ impl<M: CellModel> World<M> {
         } else {
             self.act_optimistic(gvt, &mut out);
             self.flush_ghosts(&mut out);
+            let held_back = self.head < self.end && !self.may_advance(gvt);
             if let Some(t) = &mut self.throttle {
-                if self.head < self.end && self.head + 1 >= gvt + self.window {
+                if held_back {
                     t.held_back();
                 }
             }
@@ -408,7 +418,7 @@ impl<M: CellModel> World<M> {
             if let Some(r) = &mut self.record {
                 r.repaired();
             }
-        } else if self.head < self.end && self.head + 1 < gvt + self.window {
+        } else if self.may_advance(gvt) {
             self.advance(out);
         } else {
             self.counters.idle_acts += 1;
