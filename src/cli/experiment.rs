@@ -485,3 +485,14 @@ fn rp_efficiency(quick: bool, svg: &Path) -> Result<Vec<Row>> {
     )?;
     Ok(rows)
 }
+
+/// The median of `v` (the mean of the middle two for an even count).
+pub(super) fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    match n {
+        0 => 0.0,
+        _ if n % 2 == 1 => v[n / 2],
+        _ => (v[n / 2 - 1] + v[n / 2]) / 2.0,
+    }
+}

@@ -5,7 +5,8 @@
 //! `cluster-model.csv` and `cluster-model.svg` and prints, per network and rank count, the
 //! smallest size at which the model's parallel efficiency reaches one half.
 
-use super::{f, scene};
+use super::super::table::csv_line;
+use super::{f, median, scene};
 use anyhow::Result;
 use soda::app::charts;
 use soda::exec::reference::ReferenceRun;
@@ -75,15 +76,18 @@ pub(super) fn cluster_model(quick: bool, csv: &Path, svg: &Path) -> Result<()> {
                 wire.encode_decode_seconds * 1e6,
                 wire.hash_seconds * 1e6
             );
+            // One partition per rank count, for every network and commit.
+            let parts: Vec<Partition> = ranks
+                .iter()
+                .map(|&r| Partition::build(&PartitionKind::Blocks, &grid, r, &positions, 0))
+                .collect();
             for network in &networks {
                 for full in [true, false] {
                     let mut points = Vec::new();
-                    for &r in &ranks {
-                        let part =
-                            Partition::build(&PartitionKind::Blocks, &grid, r, &positions, 0);
+                    for (&r, part) in ranks.iter().zip(&parts) {
                         let m = predict_cluster(
                             &grid,
-                            &part,
+                            part,
                             &costs,
                             &occupancy,
                             &wire,
@@ -93,20 +97,23 @@ pub(super) fn cluster_model(quick: bool, csv: &Path, svg: &Path) -> Result<()> {
                                 full_state_commit: full,
                             },
                         );
-                        text.push_str(&format!(
-                            "{name},{bodies},{steps},{r},{},{},{},{},{},{},{},{},{},{},{}\n",
-                            network.name,
-                            network.latency_seconds,
-                            network.bytes_per_second,
-                            if full { "full-state" } else { "free" },
+                        text.push_str(&csv_line([
+                            name.to_string(),
+                            bodies.to_string(),
+                            steps.to_string(),
+                            r.to_string(),
+                            network.name.to_string(),
+                            network.latency_seconds.to_string(),
+                            network.bytes_per_second.to_string(),
+                            (if full { "full-state" } else { "free" }).to_string(),
                             f(m.sequential_seconds),
                             f(m.dataflow_seconds),
                             f(m.cluster_seconds),
                             f(m.speedup()),
                             f(m.efficiency()),
                             f(m.ghost_bytes / steps as f64),
-                            f(m.commit_bytes / steps as f64)
-                        ));
+                            f(m.commit_bytes / steps as f64),
+                        ]));
                         points.push((r as f64, m.speedup()));
                         let commit = if full {
                             "full-state commit"
@@ -158,15 +165,11 @@ pub(super) fn cluster_model(quick: bool, csv: &Path, svg: &Path) -> Result<()> {
 fn wire_costs(bodies: &[soda::Body]) -> WireCosts {
     let wire = RigidBodyModel::wire().expect("the rigid-body model has a wire");
     let mut words = Vec::new();
-    for b in bodies.iter().take(1) {
+    if let Some(b) = bodies.first() {
         (wire.state_to_words)(b, &mut words);
     }
     let bytes_per_state = 8.0 * (words.len() as f64 + 1.0);
     let n = bodies.len().max(1) as f64;
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
     let mut coding = Vec::new();
     let mut hashing = Vec::new();
     for _ in 0..5 {

@@ -3,7 +3,7 @@
 //! the peak over collisions before it — and how the optimism window W absorbs it: threaded
 //! runs for W = 1..64, timing every committed frame as the output stage receives it.
 
-use super::{cores, f, scene, Row};
+use super::{cores, f, median, scene, Row};
 use anyhow::{bail, Context, Result};
 use parry3d::query;
 use parry3d::shape::{Ball, Cuboid, Shape as ParryShape};
@@ -250,17 +250,6 @@ fn model(
             (w, m.makespan, m.worst_gap())
         })
         .collect()
-}
-
-/// The median of `v` (the mean of the middle two for an even count).
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    match n {
-        0 => 0.0,
-        _ if n % 2 == 1 => v[n / 2],
-        _ => (v[n / 2 - 1] + v[n / 2]) / 2.0,
-    }
 }
 
 /// The experiment: the peak's cost from a reference run, then threaded runs for every
