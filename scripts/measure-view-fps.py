@@ -5,7 +5,7 @@ Starts `soda view --port 0 ARGS`, opens the page in headless Chromium through Ch
 at a fixed window size, lets it warm up, then for --seconds counts on the page itself:
   page fps   requestAnimationFrame callbacks per second (the page's display rate);
   shown fps  distinct simulation frames drawn per second (window.soda.shown.step changing);
-and reads the page's own per-frame costs (window.soda.drawMs: decode + instancing,
+and reads the page's own per-frame costs (window.soda.drawMs: draw(), the vertex writing (decoding happens on arrival),
 window.soda.renderMs: three.js render call; exponential averages), its render scale if it
 has one (window.sodaStats), Chromium's renderer-process task/script time (CDP
 Performance.getMetrics) and the CPU time of soda and of Chromium's processes (/proc).

@@ -343,8 +343,9 @@ function draw(f) {
       if (f.recomputes[c] > lastRecomputes[c] && f.owners[c] === lastOwners[c]) flash.set(c, 1);
     }
   }
-  lastRecomputes = f.recomputes.slice();
-  lastOwners = f.owners.slice();
+  // Views on this frame's own buffer (every message has its own): kept, not copied.
+  lastRecomputes = f.recomputes;
+  lastOwners = f.owners;
   drawFlashes();
   // The panel's text is rewritten about 8 times a second (every write costs the page a
   // layout and a repaint), at once when the display pauses or resumes.
@@ -422,7 +423,7 @@ function drawTimeline(f) {
     }
     if (rh >= 9) { ctx.fillStyle = '#9aa4ae'; ctx.fillText(`w${i}`, 4, y + rh - 2); }
   }
-  lastTimeline = f.rollbacks.slice();
+  lastTimeline = f.rollbacks;
   ctx.strokeStyle = '#ffffff'; ctx.beginPath(); ctx.moveTo(x(f.gvt), 14); ctx.lineTo(x(f.gvt), h); ctx.stroke();
   ctx.fillStyle = '#ffffff'; ctx.fillText(`GVT ${f.gvt}`, Math.min(w - 60, x(f.gvt) + 3), 12);
   ctx.strokeStyle = '#4aa3ff'; ctx.beginPath(); ctx.moveTo(x(f.step + f.buffered), 14); ctx.lineTo(x(f.step + f.buffered), h); ctx.stroke();
@@ -526,7 +527,7 @@ soda.screenPointOf = (id) => {
 // --- render loop ------------------------------------------------------------------------------
 // The page draws when a new frame came, the camera moved, a flash fades or the page was
 // resized, not on every animation frame. Its own cost is in window.sodaStats: animation
-// frames per second, frames drawn per second, decode + instancing and render ms per frame
+// frames per second, frames drawn per second, draw() (vertex writing; decoding is in onmessage) and render ms per frame
 // (averages), and the render scale: the canvas has scale × the CSS pixels. With `auto`
 // (the default; `?scale=0.5` fixes it), the scale drops a step each second the page draws
 // fewer than 55 frames/s while frames keep coming, down to 25 %, and climbs back a step after
@@ -559,12 +560,11 @@ function adapt(now) {
   stats.drawnFps = stats.renders / seconds;
   // Busy: the page drew on (nearly) every animation frame, so frames wait for it.
   const busy = stats.renders >= stats.ticks * 0.9 && stats.renders > 0;
-  if (stats.auto && busy) {
+  // Lower a step while busy below 55 fps; raise one after 3 s at 58 or more.
+  if (stats.auto) {
     const at = SCALES.indexOf(stats.scale);
-    if (stats.pageFps < 55 && at < SCALES.length - 1) { stats.scale = SCALES[at + 1]; stats.fast = 0; resize(); }
+    if (busy && stats.pageFps < 55 && at < SCALES.length - 1) { stats.scale = SCALES[at + 1]; stats.fast = 0; resize(); }
     else if (stats.pageFps >= 58 && at > 0 && ++stats.fast >= 3) { stats.scale = SCALES[at - 1]; stats.fast = 0; resize(); }
-  } else if (stats.auto && stats.pageFps >= 58 && stats.scale < 1 && ++stats.fast >= 3) {
-    stats.scale = SCALES[SCALES.indexOf(stats.scale) - 1]; stats.fast = 0; resize();
   }
   stats.ticks = 0; stats.renders = 0; stats.windowStart = now;
   if (!panelFrame && soda.shown) panelFrame = lastFrame;

@@ -59,8 +59,8 @@ pub enum ExperimentName {
     /// before playing); per window and buffer, whether the display starves during the peak.
     PeakDisplay,
     /// A MODEL of the MPI executor on 16, 64 and 256 ranks of a cluster (InfiniBand and
-    /// 10 GbE), from cell costs, occupancy and wire costs measured here on falling-cubes at
-    /// several sizes: predicted speed-up, bytes per step, and the size from which it pays.
+    /// 10 GbE), from cell costs, occupancy and wire costs measured here on falling-cubes and
+    /// sparse-gas at several sizes: predicted speed-up, bytes per step, and the size from which it pays.
     ClusterModel,
 }
 

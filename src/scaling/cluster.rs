@@ -14,7 +14,9 @@
 //! - GVT rounds are synchronous (SPEC.md §14): every `steps_per_round` steps every rank
 //!   waits for the slowest, then an all-reduce (`2 · latency · ⌈log₂ R⌉`), then rank 0
 //!   gathers every state of the round's steps over its one link and decodes and hashes them
-//!   (the full-state commit as implemented) while every rank waits at the next round.
+//!   (the full-state commit as implemented) while every rank waits at the next round. This
+//!   counts rank 0's own states too, which it reads without the wire (bytes overstated by
+//!   `R/(R−1)`), and charges the encoding to rank 0 (SPEC.md §12).
 //!
 //! Not modelled: rollbacks (the optimistic ideal: every speculation right), the window,
 //! load imbalance beyond the measured cell costs, contention in the network, caches. The

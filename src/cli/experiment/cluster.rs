@@ -1,9 +1,9 @@
 //! `soda experiment cluster-model`: a **model** of the MPI executor on 16, 64 and 256 ranks of
 //! a cluster (`soda::scaling::cluster`, SPEC.md §12), built from what this machine measures:
-//! every cell computation's time and every cell's occupancy in a reference run of
-//! `falling-cubes` at several sizes, and the time to encode, decode and hash one body. Writes
-//! `cluster-model.csv` and `cluster-model.svg` and prints, per network and rank count, the
-//! smallest size at which the model's parallel efficiency reaches one half.
+//! every cell computation's time and every cell's occupancy in reference runs of
+//! `falling-cubes` and `sparse-gas` at several sizes, and the time to encode, decode and hash
+//! one body. Writes `cluster-model.csv` and `cluster-model.svg` and prints, per network and
+//! rank count, the smallest size at which the model's parallel efficiency reaches one half.
 
 use super::super::table::csv_line;
 use super::{f, median, scene};
