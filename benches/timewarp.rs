@@ -232,7 +232,8 @@ fn log_memory() {
         r.run(chunk);
         done += chunk;
         let held = r.steps_held();
-        let bytes = r.log_bytes();
+        let b = r.log_breakdown();
+        let bytes = b.total();
         println!(
             "  step {:6}: logs {:8.1} MiB over {held} world-steps = {:.0} B per body-step held (per-world steps held {:.1}, GVT {})",
             r.committed_step(),
@@ -241,7 +242,6 @@ fn log_memory() {
             held as f64 / 8.0,
             r.gvt()
         );
-        let b = r.log_breakdown();
         let per = |x: u64| x as f64 / (cubes as f64 * held as f64 / 8.0);
         println!(
             "    B per body-step: states {:.1}, outputs {:.1}, ghosts {:.1}, migrations {:.1}, inputs {:.1}, received {:.1}, sent {:.1}, slots {:.1}",
@@ -283,7 +283,8 @@ fn log_flatness() {
         r.run(chunk);
         done += chunk;
         let held = r.steps_held();
-        let bytes = r.log_bytes();
+        let b = r.log_breakdown();
+        let bytes = b.total();
         println!(
             "  step {:6}: logs {:7.2} MiB over {held:4} world-steps = {:.0} B per body-step held; peak so far {:.2} MiB",
             r.committed_step(),
