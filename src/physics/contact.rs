@@ -34,11 +34,27 @@ pub struct ContactSet {
     pub restitution: f32,
     /// The points.
     pub points: SmallVec<[ContactPoint; 4]>,
-    /// Whether the partner is a movable body resting against `i` in a supported pile (SPEC.md
-    /// §5.3, pile contacts): solved here with the partner's inverse mass, so each of the two
-    /// bodies takes its share of the contact, and its position correction is added whole
-    /// rather than averaged with the other partners' (the two shares remove the overlap once).
-    pub shared: bool,
+    /// How `i`'s solve treats the partner (SPEC.md §5.2, §5.3).
+    pub role: SetRole,
+}
+
+/// How body `i`'s own solve treats a contact set's partner (SPEC.md §5.2, §5.3).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SetRole {
+    /// `i` does the whole job against the partner's step-`t` motion: the static environment,
+    /// and a body `i` rests on (a support, whose inverse mass counts as 0).
+    #[default]
+    Whole,
+    /// A pile contact: the partner is a movable body resting against `i` in a supported pile,
+    /// solved here with the partner's inverse mass, so each of the two bodies takes its share
+    /// of the contact; its position correction is added whole rather than averaged with the
+    /// other partners' (the two shares remove the overlap once).
+    Pile,
+    /// The partner rests on `i` (a support whose lower body is `i`). Its weight is not `i`'s
+    /// to carry (shock propagation), but `i` must not push into it for free: only `i`'s own
+    /// approach is stopped, `i`'s share of it, with no position correction, friction or
+    /// bounce. The partner's velocity counts only when it moves away from `i`.
+    Carried,
 }
 
 /// A pair manifold between bodies `a` (lower id) and `b`, in world frame.
@@ -152,7 +168,7 @@ pub(crate) fn view(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
         friction: 0.5 * (i.friction + j.friction),
         restitution: 0.5 * (i.restitution + j.restitution),
         points,
-        shared: false,
+        role: SetRole::Whole,
     }
 }
 
@@ -237,6 +253,6 @@ pub(crate) fn environment_contacts(
         friction: 0.5 * (env.friction + i.friction),
         restitution: 0.5 * (env.restitution + i.restitution),
         points,
-        shared: false,
+        role: SetRole::Whole,
     })
 }

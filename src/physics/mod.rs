@@ -12,7 +12,7 @@ mod params;
 mod solver;
 
 pub use body::{Body, Material, Shape};
-pub use contact::{ContactPoint, ContactSet};
+pub use contact::{ContactPoint, ContactSet, SetRole};
 pub use environment::{DomainBox, Environment, Plane, StaticCuboid};
 pub use event::EventKind;
 pub use model::RigidBodyModel;

@@ -28,6 +28,11 @@ pub struct SolverParams {
     /// m/s (above restitution's own target). 0 (the default) makes depenetration
     /// energy-free; a positive value may add up to that speed per correction.
     pub max_separation_speed: f32,
+    /// Radius of the contact patch assumed for torsional friction, m: at each contact point
+    /// with a normal impulse `N`, a spin about the normal is resisted by up to `μ·N·radius`
+    /// (SPEC.md §5.3). A point contact alone cannot stop a ball spinning about the vertical
+    /// on the ground. 0 turns it off.
+    pub patch_radius: f32,
     /// Speed below which a body counts as quiet for sleeping, m/s (linear speed, and angular
     /// speed times the bounding radius).
     pub sleep_speed: f32,
@@ -48,6 +53,7 @@ impl Default for SolverParams {
             max_speed: 30.0,
             max_angular_speed: 60.0,
             max_separation_speed: 0.0,
+            patch_radius: 0.005,
             sleep_speed: 0.05,
             sleep_steps: 30,
         }

@@ -10,7 +10,7 @@
 
 use super::body::Body;
 use super::body::Shape;
-use super::contact::{ContactPoint, ContactSet};
+use super::contact::{ContactPoint, ContactSet, SetRole};
 use super::params::SolverParams;
 use crate::math::{Quat, Vec3};
 use nalgebra::{Matrix3, Quaternion};
@@ -126,6 +126,20 @@ fn cancelling_spin(body: &Body, q: &Quat, w: &Vec3, dw: &Vec3, allowance: f32) -
     };
     let extra = ((1.0 - s) * len).min(allowance);
     dw * s + dw * (extra / len)
+}
+
+/// The spin change of torsional friction at a point with normal `n` (SPEC.md §5.3): the
+/// angular impulse about `n` that stops the spin `ω·n`, bounded by `cap` (μ·N·patch radius),
+/// as `I⁻¹·n·L`; zero if there is no spin about `n`. It only removes rotational energy: the
+/// spin about `n` moves towards 0 and never past it.
+fn torsional_impulse(f: &Frame, w: &Vec3, n: &Vec3, cap: f32) -> Vec3 {
+    let spin = w.dot(n);
+    let i_n = f.inv_inertia * n;
+    let k = n.dot(&i_n);
+    if spin == 0.0 || k <= 0.0 || cap <= 0.0 {
+        return Vec3::zeros();
+    }
+    i_n * (spin / k).clamp(-cap, cap)
 }
 
 /// Applies impulse `imp` at offset `r` to the velocities `v`, `w`.
@@ -321,6 +335,11 @@ pub(crate) fn solve_body(
             let mut dx = Vec3::zeros();
             let mut dtheta = Vec3::zeros();
             let mut touched = false;
+            if set.role == SetRole::Carried {
+                // Not `i`'s overlap to remove: the partner rests on `i` and corrects it.
+                k += set.points.len();
+                continue;
+            }
             for (m, cp) in set.points.iter().enumerate() {
                 let r0 = offset(&b, &fp.rot, cp);
                 let rn = r0.cross(&cp.normal);
@@ -347,7 +366,7 @@ pub(crate) fn solve_body(
                 }
             }
             k += set.points.len();
-            if touched && set.shared {
+            if touched && set.role == SetRole::Pile {
                 shared_dx += dx;
                 shared_dtheta += dtheta;
             } else if touched {
@@ -433,7 +452,10 @@ pub(crate) fn solve_body(
                 // stopped. A set that bounced keeps its separation (restitution's).
                 if vn < 0.0 {
                     dv += cp.normal * -vn;
-                } else if !bounced_sets[s] && vn > p.max_separation_speed {
+                } else if !bounced_sets[s]
+                    && vn > p.max_separation_speed
+                    && set.role != SetRole::Carried
+                {
                     // Depenetration must not fling bodies: the separating speed a position
                     // correction produced is capped (the whole excess is removed on i's side).
                     let excess = vn - p.max_separation_speed;
@@ -442,7 +464,7 @@ pub(crate) fn solve_body(
                     apply_impulse(&f1, &mut b.linvel, &mut b.angvel, &r, &imp);
                 }
                 let vt_len = vt.norm();
-                if vt_len > 0.0 {
+                if vt_len > 0.0 && set.role != SetRole::Carried {
                     let cap = set.friction * normal_impulse;
                     let w_t = f1.inv_mass_at(&r, &(vt / vt_len));
                     let wt_total = w_t + cp.partner_inv_mass;
@@ -459,6 +481,10 @@ pub(crate) fn solve_body(
                     let w = f1.inv_mass_at(&r, &dir) + cp.partner_inv_mass;
                     let imp = dir * (dir_len / w);
                     apply_impulse(&f1, &mut b.linvel, &mut b.angvel, &r, &imp);
+                }
+                if set.role != SetRole::Carried {
+                    let cap = set.friction * normal_impulse * p.patch_radius;
+                    b.angvel -= torsional_impulse(&f1, &b.angvel, &cp.normal, cap);
                 }
             }
         }

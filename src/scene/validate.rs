@@ -160,6 +160,13 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         "must be between 0 and 100 m/s",
     )?;
     c.range(
+        "solver.patch_radius",
+        s.patch_radius,
+        0.0,
+        10.0,
+        "must be between 0 (no torsional friction) and 10 metres",
+    )?;
+    c.range(
         "solver.sleep_speed",
         s.sleep_speed,
         0.0,
