@@ -2,6 +2,7 @@
 // with three.js, and sends the user's acts back as JSON messages.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/OrbitControls.js';
+import { Occlusion } from './occlusion.js';
 
 const HEADER = 64, WORLD = 24, BODY = 52;
 const $ = (id) => document.getElementById(id);
@@ -10,7 +11,10 @@ const $ = (id) => document.getElementById(id);
 const soda = {
   scene: null, frames: 0, shown: null, outcomes: [], saved: null, selected: null,
   socket: null, ids: [],
-  drawMs: 0, renderMs: 0,   // the page's own cost per frame: decoding and instancing, and WebGL
+  drawMs: 0, renderMs: 0,   // the page's own cost per frame: decoding, culling and vertex writing; WebGL
+  // Bodies the camera cannot see are not sent to the GL (web/occlusion.js); `?cull=0` sends
+  // them all. `drawn`: how many were sent last time.
+  cull: new URLSearchParams(location.search).get('cull') !== '0', drawn: 0,
 };
 window.soda = soda;
 
@@ -147,16 +151,10 @@ class Bodies {
     world3.add(this.mesh);
   }
   dispose() { world3.remove(this.mesh); this.mesh.geometry.dispose(); }
-  // Writes slot k: the shape scaled by (sx, sy, sz), rotated by (qx, qy, qz, qw), moved to
+  // Writes slot k: the shape scaled by (sx, sy, sz), rotated by r (rotationOf), moved to
   // (px, py, pz), coloured `colour` as lit.
-  place(k, px, py, pz, qx, qy, qz, qw, sx, sy, sz, colour) {
-    const x2 = qx + qx, y2 = qy + qy, z2 = qz + qz;
-    const xx = qx * x2, xy = qx * y2, xz = qx * z2, yy = qy * y2, yz = qy * z2, zz = qz * z2;
-    const wx = qw * x2, wy = qw * y2, wz = qw * z2;
-    // The rotation's columns: where the body's x, y and z axes point.
-    const r0 = 1 - (yy + zz), r1 = xy + wz, r2 = xz - wy;
-    const r4 = xy - wz, r5 = 1 - (xx + zz), r6 = yz + wx;
-    const r8 = xz + wy, r9 = yz - wx, r10 = 1 - (xx + yy);
+  place(k, px, py, pz, r, sx, sy, sz, colour) {
+    const r0 = r[0], r1 = r[1], r2 = r[2], r4 = r[3], r5 = r[4], r6 = r[5], r8 = r[6], r9 = r[7], r10 = r[8];
     const m0 = r0 * sx, m1 = r1 * sx, m2 = r2 * sx, m4 = r4 * sy, m5 = r5 * sy, m6 = r6 * sy;
     const m8 = r8 * sz, m9 = r9 * sz, m10 = r10 * sz;
     const c = this.shape.corners, out = this.positions.array, col = this.colors.array, n = this.shape.vertices;
@@ -214,6 +212,18 @@ const LIGHT = {
   dr: (SKY.r - EARTH.r) * 1.6 / Math.PI, dg: (SKY.g - EARTH.g) * 1.6 / Math.PI, db: (SKY.b - EARTH.b) * 1.6 / Math.PI,
   sun: 1.8 / Math.PI,
 };
+
+// The rotation of the unit quaternion (qx, qy, qz, qw) as its columns, written into `out`:
+// where the body's x (out[0..2]), y (out[3..5]) and z (out[6..8]) axes point.
+function rotationOf(qx, qy, qz, qw, out) {
+  const x2 = qx + qx, y2 = qy + qy, z2 = qz + qz;
+  const xx = qx * x2, xy = qx * y2, xz = qx * z2, yy = qy * y2, yz = qy * z2, zz = qz * z2;
+  const wx = qw * x2, wy = qw * y2, wz = qw * z2;
+  out[0] = 1 - (yy + zz); out[1] = xy + wz; out[2] = xz - wy;
+  out[3] = xy - wz; out[4] = 1 - (xx + zz); out[5] = yz + wx;
+  out[6] = xz + wy; out[7] = yz - wx; out[8] = 1 - (xx + yy);
+  return out;
+}
 
 function ensureCapacity(bodies, shape, material, n) {
   if (bodies && bodies.capacity >= n) return bodies;
@@ -274,7 +284,7 @@ function setUpScene(s) {
 }
 
 // --- frames -------------------------------------------------------------------------------
-let pending = null;     // the latest frame received, not yet drawn
+let pending = null;     // the latest frame's bytes, not yet drawn (decoded only when drawn)
 
 function decode(buffer) {
   const v = new DataView(buffer);
@@ -308,34 +318,61 @@ function decode(buffer) {
 const m4 = new THREE.Matrix4();
 const white = new THREE.Color(0xffffff);
 let ids = new Float64Array(0);
+const occlusion = new Occlusion(256);
+const rotations = { r: new Float64Array(0) };
 
-// Writes the frame's bodies straight from its bytes into the meshes' vertex arrays.
-function draw(f) {
+// Writes the bodies of frame f that the camera can see (all with `?cull=0`) straight from
+// its bytes into the meshes' vertex arrays. Runs for every frame drawn and whenever the
+// camera moves: what is hidden depends on both.
+function placeBodies(f) {
   const n = f.bodies;
   const u8 = new Uint8Array(f.view.buffer, f.bodyOffset, n * BODY);
   const u16 = new Uint16Array(f.view.buffer, f.bodyOffset, n * BODY / 2);
   const u32 = new Uint32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
   const f32 = new Float32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
+  if (rotations.r.length < n * 9) rotations.r = new Float64Array(n * 9);
+  const rot = rotations.r;
+  // First every body marks the occlusion buffer, then each is tested against all of them.
+  if (soda.cull) {
+    camera.updateMatrixWorld();
+    occlusion.begin(camera, n);
+  }
   let nb = 0;
-  for (let i = 0; i < n; i++) if (u8[i * BODY + 10] === 1) nb++;
+  for (let i = 0; i < n; i++) {
+    const w = i * (BODY / 4), box = u8[i * BODY + 10] === 1;
+    if (box) nb++;
+    const r = rotationOf(f32[w + 6], f32[w + 7], f32[w + 8], f32[w + 9], rot.subarray(i * 9, i * 9 + 9));
+    if (soda.cull) {
+      occlusion.body(i, f32[w + 3], f32[w + 4], f32[w + 5], box ? r : null, f32[w + 10], f32[w + 11], f32[w + 12], f32[w + 10]);
+    }
+  }
   boxes = ensureCapacity(boxes, boxShape, boxMaterial, nb);
   balls = ensureCapacity(balls, ballShape, ballMaterial, n - nb);
-  if (ids.length !== n) ids = new Float64Array(n);
   const next = [0, 0];
   const selected = soda.selected;
   for (let i = 0; i < n; i++) {
+    if (soda.cull && occlusion.hidden(i)) continue;
     const w = i * (BODY / 4);
-    const id = u32[w + 1] * 4294967296 + u32[w];
-    ids[i] = id;
+    const id = ids[i];
     const world = u16[w * 2 + 4], kind = u8[i * BODY + 10] === 1 ? 0 : 1, asleep = u8[i * BODY + 11] === 1;
     const into = kind === 0 ? boxes : balls, k = next[kind]++;
     into.ids[k] = id;
-    into.place(k, f32[w + 3], f32[w + 4], f32[w + 5], f32[w + 6], f32[w + 7], f32[w + 8], f32[w + 9],
+    into.place(k, f32[w + 3], f32[w + 4], f32[w + 5], rot.subarray(i * 9, i * 9 + 9),
       f32[w + 10], f32[w + 11], f32[w + 12], id === selected ? white : palette(world, f.worlds, asleep));
   }
-  soda.ids = ids;
   boxes.finish(next[0]);
   balls.finish(next[1]);
+  soda.drawn = next[0] + next[1];
+}
+
+// Takes frame f as the one shown: its body ids, the cells' flashes, the panel and timeline
+// (its bodies are placed by placeBodies, before the render).
+function draw(f) {
+  const n = f.bodies;
+  const u32 = new Uint32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
+  if (ids.length !== n) ids = new Float64Array(n);
+  for (let i = 0; i < n; i++) ids[i] = u32[i * (BODY / 4) + 1] * 4294967296 + u32[i * (BODY / 4)];
+  soda.ids = ids;
   // A cell flashes when a rollback reached it since the frame drawn before: its count of
   // re-executed computations grew (a cell that changed owner restarts its count: no flash).
   if (lastRecomputes && lastRecomputes.length === f.cells) {
@@ -389,7 +426,7 @@ function drawPanel() {
   const seconds = f.buffered / (soda.scene.fps * f.speed);
   $('buffer').textContent = `${f.buffered} frames, ${seconds.toFixed(2)} s`;
   $('starved').textContent = `${f.starved} ticks`;
-  $('bodies').textContent = f.bodies;
+  $('bodies').textContent = soda.cull ? `${f.bodies} (${soda.drawn} in sight)` : f.bodies;
   $('speed').textContent = `${+f.speed.toFixed(3)}×`;
   $('pause').textContent = f.paused ? 'resume' : 'pause';
 }
@@ -451,7 +488,8 @@ function connect() {
       else if (m.type === 'saved') { soda.saved = m; say(`saved at step ${m.step}, hash ${m.hash}:\n${m.command}`); }
       return;
     }
-    try { pending = decode(e.data); soda.frames++; } catch (err) { say(String(err)); }
+    pending = e.data;
+    soda.frames++;
   };
   socket.onclose = () => setTimeout(connect, 1000);
 }
@@ -512,7 +550,8 @@ window.addEventListener('keydown', (e) => {
   else if (e.key === '-') setSpeed(speed / 2);
 });
 
-// Where body `id` appears on the page, in CSS pixels (for tests and scripted demos).
+// Where body `id` appears on the page, in CSS pixels (for tests and scripted demos); null
+// if it is not drawn (out of sight: see placeBodies).
 soda.screenPointOf = (id) => {
   for (const b of [boxes, balls]) {
     const k = b ? b.slotOf(id) : -1;
@@ -527,7 +566,7 @@ soda.screenPointOf = (id) => {
 // --- render loop ------------------------------------------------------------------------------
 // The page draws when a new frame came, the camera moved, a flash fades or the page was
 // resized, not on every animation frame. Its own cost is in window.sodaStats: animation
-// frames per second, frames drawn per second, draw() (vertex writing; decoding is in onmessage) and render ms per frame
+// frames per second, frames drawn per second, the page's JS per frame drawn (decoding, culling, vertex writing) and render ms per frame
 // (averages), and the render scale: the canvas has scale × the CSS pixels. With `auto`
 // (the default; `?scale=0.5` fixes it), the scale drops a step each second the page draws
 // fewer than 55 frames/s while frames keep coming, down to 25 %, and climbs back a step after
@@ -570,17 +609,26 @@ function adapt(now) {
   if (!panelFrame && soda.shown) panelFrame = lastFrame;
 }
 let lastFrame = null;
+// The bodies are placed again when a new frame came or the camera moved or the page resized.
+let placeAgain = false;
+controls.addEventListener('change', () => { placeAgain = true; });
+window.addEventListener('resize', () => { placeAgain = true; });
 function loop(now) {
   stats.ticks++;
+  const t0 = performance.now();
   if (pending && soda.scene) {
-    const t0 = performance.now();
-    draw(pending);
-    lastFrame = pending;
+    let f = null;
+    try { f = decode(pending); } catch (err) { say(String(err)); }
     pending = null;
+    if (f) { draw(f); lastFrame = f; placeAgain = true; }
+  }
+  if (controls.update()) placeAgain = true;
+  if (placeAgain && lastFrame) {
+    placeAgain = false;
+    placeBodies(lastFrame);
     soda.drawMs = soda.drawMs * 0.9 + (performance.now() - t0) * 0.1;
     needRender = true;
   }
-  if (controls.update()) needRender = true;
   if (flash.size > 0 && !needRender) { drawFlashes(); needRender = true; }
   if (needRender) {
     needRender = false;
@@ -596,3 +644,14 @@ function loop(now) {
 }
 requestAnimationFrame(loop);
 connect();
+
+// Places the bodies and renders at once, in this task (tests and tools compare the pixels
+// with and without culling: the canvas can be read until the task ends).
+soda.camera = camera;
+soda.controls = controls;
+soda.renderNow = () => {
+  camera.updateMatrixWorld();
+  if (lastFrame) placeBodies(lastFrame);
+  renderer.render(world3, camera);
+  return renderer.domElement;
+};
