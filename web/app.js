@@ -12,9 +12,9 @@ const soda = {
   scene: null, frames: 0, shown: null, outcomes: [], saved: null, selected: null,
   socket: null, ids: [],
   drawMs: 0, renderMs: 0,   // the page's own cost per frame: decoding, culling and vertex writing; WebGL
-  // Bodies the camera cannot see are not sent to the GL (web/occlusion.js); `?cull=0` sends
-  // them all. `drawn`: how many were sent last time.
-  cull: new URLSearchParams(location.search).get('cull') !== '0', drawn: 0,
+  // Bodies and box faces the camera cannot see are not sent to the GL (web/occlusion.js);
+  // `?cull=0` sends them all. `drawn`, `triangles`: how many were sent last time.
+  cull: new URLSearchParams(location.search).get('cull') !== '0', drawn: 0, triangles: 0,
 };
 window.soda = soda;
 
@@ -126,6 +126,7 @@ function palette(world, worlds, asleep) {
 }
 
 // The bodies of one shape: capacity bodies, `count` drawn, slot k's vertices at k·vertices.
+// A box's triangles are listed face by face, only the faces to draw (place's `faces`).
 class Bodies {
   constructor(shape, material, capacity) {
     const v = shape.vertices, t = shape.triangles;
@@ -143,18 +144,23 @@ class Bodies {
     for (let k = 0, at = 0; k < capacity; k++) for (const i of t) index[at++] = k * v + i;
     geometry.setAttribute('position', positions);
     geometry.setAttribute('color', colors);
-    geometry.setIndex(new THREE.BufferAttribute(index, 1));
+    const indices = new THREE.BufferAttribute(index, 1);
+    indices.setUsage(THREE.DynamicDrawUsage);
+    geometry.setIndex(indices);
     geometry.setDrawRange(0, 0);
-    this.positions = positions; this.colors = colors;
+    this.positions = positions; this.colors = colors; this.indices = indices;
+    this.listed = 0;   // indices listed so far in this frame
     this.mesh = new THREE.Mesh(geometry, material);
     this.mesh.frustumCulled = false;
     world3.add(this.mesh);
   }
   dispose() { world3.remove(this.mesh); this.mesh.geometry.dispose(); }
-  // Writes slot k: the shape scaled by (sx, sy, sz), rotated by r (rotationOf), moved to
-  // (px, py, pz), coloured `colour` as lit.
-  place(k, px, py, pz, r, sx, sy, sz, colour) {
-    const r0 = r[0], r1 = r[1], r2 = r[2], r4 = r[3], r5 = r[4], r6 = r[5], r8 = r[6], r9 = r[7], r10 = r[8];
+  // Writes slot k: the shape scaled by (sx, sy, sz), rotated by r[at..at + 9] (rotationOf),
+  // moved to (px, py, pz), coloured `colour` as lit; a box lists its faces in the bits of
+  // `faces` (1 << f for f = +x, −x, +y, −y, +z, −z; Occlusion.faces).
+  place(k, px, py, pz, r, at, sx, sy, sz, colour, faces) {
+    const r0 = r[at], r1 = r[at + 1], r2 = r[at + 2], r4 = r[at + 3], r5 = r[at + 4], r6 = r[at + 5];
+    const r8 = r[at + 6], r9 = r[at + 7], r10 = r[at + 8];
     const m0 = r0 * sx, m1 = r1 * sx, m2 = r2 * sx, m4 = r4 * sy, m5 = r5 * sy, m6 = r6 * sy;
     const m8 = r8 * sz, m9 = r9 * sz, m10 = r10 * sz;
     const c = this.shape.corners, out = this.positions.array, col = this.colors.array, n = this.shape.vertices;
@@ -165,6 +171,16 @@ class Bodies {
       out[o + 2] = m2 * x + m6 * y + m10 * z + pz;
     }
     const face = this.shape.face, cr = colour.r, cg = colour.g, cb = colour.b;
+    const t = this.shape.triangles, index = this.indices.array;
+    if (face) {
+      // Face f's two triangles are t[6f..6f + 6].
+      for (let f = 0; f < 6; f++) {
+        if (!(faces & (1 << f))) continue;
+        for (let j = f * 6; j < f * 6 + 6; j++) index[this.listed++] = k * n + t[j];
+      }
+    } else {
+      this.listed += t.length;   // a ball's triangles stay where the constructor listed them
+    }
     if (face) {
       // Face f's normal is ± a rotation column; its colour goes on its own corner.
       for (let f = 0; f < 6; f++) {
@@ -188,11 +204,11 @@ class Bodies {
     }
     this.centres[k * 3] = px; this.centres[k * 3 + 1] = py; this.centres[k * 3 + 2] = pz;
   }
-  // Draws the first `count` slots.
+  // Draws the first `count` slots (their listed triangles); the next frame lists anew.
   finish(count) {
     const n = this.shape.vertices;
     this.count = count;
-    this.mesh.geometry.setDrawRange(0, count * this.shape.triangles.length);
+    this.mesh.geometry.setDrawRange(0, this.listed);
     if (count > 0) {
       for (const a of [this.positions, this.colors]) {
         a.clearUpdateRanges();
@@ -200,6 +216,12 @@ class Bodies {
         a.needsUpdate = true;
       }
     }
+    if (this.shape.face && this.listed > 0) {
+      this.indices.clearUpdateRanges();
+      this.indices.addUpdateRange(0, this.listed);
+      this.indices.needsUpdate = true;
+    }
+    this.listed = 0;
     this.mesh.geometry.boundingSphere = null;   // recomputed when picking
   }
   slotOf(id) {
@@ -213,16 +235,15 @@ const LIGHT = {
   sun: 1.8 / Math.PI,
 };
 
-// The rotation of the unit quaternion (qx, qy, qz, qw) as its columns, written into `out`:
-// where the body's x (out[0..2]), y (out[3..5]) and z (out[6..8]) axes point.
-function rotationOf(qx, qy, qz, qw, out) {
+// The rotation of the unit quaternion (qx, qy, qz, qw) as its columns, written into
+// out[at..at + 9]: where the body's x (the first 3), y and z axes point.
+function rotationOf(qx, qy, qz, qw, out, at) {
   const x2 = qx + qx, y2 = qy + qy, z2 = qz + qz;
   const xx = qx * x2, xy = qx * y2, xz = qx * z2, yy = qy * y2, yz = qy * z2, zz = qz * z2;
   const wx = qw * x2, wy = qw * y2, wz = qw * z2;
-  out[0] = 1 - (yy + zz); out[1] = xy + wz; out[2] = xz - wy;
-  out[3] = xy - wz; out[4] = 1 - (xx + zz); out[5] = yz + wx;
-  out[6] = xz + wy; out[7] = yz - wx; out[8] = 1 - (xx + yy);
-  return out;
+  out[at] = 1 - (yy + zz); out[at + 1] = xy + wz; out[at + 2] = xz - wy;
+  out[at + 3] = xy - wz; out[at + 4] = 1 - (xx + zz); out[at + 5] = yz + wx;
+  out[at + 6] = xz + wy; out[at + 7] = yz - wx; out[at + 8] = 1 - (xx + yy);
 }
 
 function ensureCapacity(bodies, shape, material, n) {
@@ -332,7 +353,7 @@ function placeBodies(f) {
   const f32 = new Float32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
   if (rotations.r.length < n * 9) rotations.r = new Float64Array(n * 9);
   const rot = rotations.r;
-  // First every body marks the occlusion buffer, then each is tested against all of them.
+  // Every body is measured against the camera, then each is decided (web/occlusion.js).
   if (soda.cull) {
     camera.updateMatrixWorld();
     occlusion.begin(camera, n);
@@ -341,11 +362,12 @@ function placeBodies(f) {
   for (let i = 0; i < n; i++) {
     const w = i * (BODY / 4), box = u8[i * BODY + 10] === 1;
     if (box) nb++;
-    const r = rotationOf(f32[w + 6], f32[w + 7], f32[w + 8], f32[w + 9], rot.subarray(i * 9, i * 9 + 9));
+    rotationOf(f32[w + 6], f32[w + 7], f32[w + 8], f32[w + 9], rot, i * 9);
     if (soda.cull) {
-      occlusion.body(i, f32[w + 3], f32[w + 4], f32[w + 5], box ? r : null, f32[w + 10], f32[w + 11], f32[w + 12], f32[w + 10]);
+      occlusion.body(i, f32[w + 3], f32[w + 4], f32[w + 5], box ? rot : null, i * 9, f32[w + 10], f32[w + 11], f32[w + 12], f32[w + 10]);
     }
   }
+  if (soda.cull) occlusion.finish();
   boxes = ensureCapacity(boxes, boxShape, boxMaterial, nb);
   balls = ensureCapacity(balls, ballShape, ballMaterial, n - nb);
   const next = [0, 0];
@@ -357,9 +379,11 @@ function placeBodies(f) {
     const world = u16[w * 2 + 4], kind = u8[i * BODY + 10] === 1 ? 0 : 1, asleep = u8[i * BODY + 11] === 1;
     const into = kind === 0 ? boxes : balls, k = next[kind]++;
     into.ids[k] = id;
-    into.place(k, f32[w + 3], f32[w + 4], f32[w + 5], rot.subarray(i * 9, i * 9 + 9),
-      f32[w + 10], f32[w + 11], f32[w + 12], id === selected ? white : palette(world, f.worlds, asleep));
+    into.place(k, f32[w + 3], f32[w + 4], f32[w + 5], rot, i * 9,
+      f32[w + 10], f32[w + 11], f32[w + 12], id === selected ? white : palette(world, f.worlds, asleep),
+      kind === 0 && soda.cull ? occlusion.faces(i) : 63);
   }
+  soda.triangles = (boxes.listed + balls.listed) / 3;
   boxes.finish(next[0]);
   balls.finish(next[1]);
   soda.drawn = next[0] + next[1];
