@@ -7,6 +7,8 @@ display, then for several camera views renders the paused frame twice in one tas
 culling (web/occlusion.js) and with every body sent to the GL (window.soda.cull = false) —
 and counts the pixels that differ. Prints, per view, the bodies in sight against the total
 and the differing pixels; --screenshot PREFIX saves PREFIX-VIEW-cull.png and -all.png.
+--flag lod compares the balls' levels of detail instead (window.soda.lod on and off; these
+do change pixels, at the edges of small balls), --scale the render scale (default 1).
 Same browser set-up as scripts/measure-view-fps.py (whose helpers it uses).
 
   scripts/check-view-cull.py
@@ -44,8 +46,8 @@ return true;
 
 # Renders with and without culling in one task and compares the pixels.
 COMPARE = """
-const s = window.soda, gl = s.renderNow(), read = (cull) => {
-  s.cull = cull;
+const s = window.soda, flag = arguments[1], gl = s.renderNow(), read = (on) => {
+  s[flag] = on;
   const gl = s.renderNow(), c = document.createElement('canvas');
   c.width = gl.width; c.height = gl.height;
   const g = c.getContext('2d');
@@ -60,7 +62,7 @@ for (let i = 0; i < a.px.length; i += 4) {
     if (++diff <= 5) where.push([(i / 4) % W, Math.floor(i / 4 / W), Array.from(a.px.slice(i, i + 3)), Array.from(b.px.slice(i, i + 3))]);
   }
 }
-s.cull = arguments[0];
+s[flag] = arguments[0];
 s.renderNow();
 return { in_sight: a.drawn, bodies: b.drawn, triangles: [a.triangles, b.triangles], pixels: a.px.length / 4, differing: diff, where };
 """
@@ -73,6 +75,8 @@ def main():
     ap.add_argument("--warmup", type=float, default=8)
     ap.add_argument("--window-size", default="1280,720")
     ap.add_argument("--screenshot", help="save PREFIX-VIEW-cull.png and PREFIX-VIEW-all.png")
+    ap.add_argument("--flag", default="cull", choices=["cull", "lod"], help="what to switch off")
+    ap.add_argument("--scale", default="1", help="the page's render scale")
     ap.add_argument("view_args", nargs="*", help="soda view options (after --)")
     a = ap.parse_args()
     view_args = a.view_args or ["--objects", "8000", "--threads", "2", "--worlds", "8"]
@@ -91,7 +95,7 @@ def main():
                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             time.sleep(0.5)
             url = f"http://127.0.0.1:{pport}/?ws={ws}"
-        url += ("&" if "?" in url else "?") + "scale=1"
+        url += ("&" if "?" in url else "?") + f"scale={a.scale}"
         port = measure.free_port()
         driver = subprocess.Popen(["chromedriver", f"--port={port}"],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -127,19 +131,20 @@ def main():
             time.sleep(0.1)
         time.sleep(0.5)
         step = js("return window.soda.shown.step")
-        print(f"# soda view {' '.join(view_args)}; step {step}; {a.window_size} at full scale")
+        print(f"# soda view {' '.join(view_args)}; step {step}; {a.window_size} at render scale {a.scale};"
+              f" {a.flag} on against off")
         home = js("const c = window.soda.camera; return c.position.toArray()")
         for name, view in VIEWS:
             js("window.soda.camera.position.fromArray(arguments[0]); window.soda.controls.update(); return true", home)
             if view:
                 js(SET_VIEW, list(view))
-            r = js(COMPARE, True)
+            r = js(COMPARE, True, a.flag)
             worst = max(worst, r["differing"])
             print(f"{name:7} in sight {r['in_sight']:5} of {r['bodies']:5}, triangles {r['triangles'][0]:6} of {r['triangles'][1]:6}; differing pixels {r['differing']} of {r['pixels']}"
                   + (f" (x, y, culled, all: {r['where']})" if r["where"] else ""))
             if a.screenshot:
-                for cull, tag in ((False, "all"), (True, "cull")):
-                    js("window.soda.cull = arguments[0]; window.soda.renderNow(); return true", cull)
+                for on, tag in ((False, "all" if a.flag == "cull" else "fine"), (True, a.flag)):
+                    js("window.soda[arguments[1]] = arguments[0]; window.soda.renderNow(); return true", on, a.flag)
                     png = measure.request("GET", s + "/screenshot")["value"]
                     with open(f"{a.screenshot}-{name}-{tag}.png", "wb") as f:
                         f.write(base64.b64decode(png))

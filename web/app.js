@@ -15,6 +15,7 @@ const soda = {
   // Bodies and box faces the camera cannot see are not sent to the GL (web/occlusion.js);
   // `?cull=0` sends them all. `drawn`, `triangles`: how many were sent last time.
   cull: new URLSearchParams(location.search).get('cull') !== '0', drawn: 0, triangles: 0,
+  lod: new URLSearchParams(location.search).get('lod') !== '0',   // coarser balls when small (BALL_LEVELS)
 };
 window.soda = soda;
 
@@ -40,16 +41,27 @@ world3.add(sun);
 // lit cubes took ~300 ms a frame (docs/performance.md, "The viewer page"). A box is its 8
 // corners, each face coloured by the light it gets through one corner that belongs to it
 // alone (a `flat` colour, taken from a triangle's last vertex); a ball is a low-poly
-// icosahedron (42 vertices) lit per vertex.
+// icosahedron (42 vertices, 80 triangles) lit per vertex, or, small on the screen, a coarser
+// one: BALL_LEVELS.
 const boxShape = boxWithFaceCorners();
-const ballShape = weld(new THREE.IcosahedronGeometry(1, 1));
+// A ball's shapes by its radius on the canvas (in its pixels): an icosahedron split once from
+// 5 pixels up, the icosahedron (12 vertices, 20 triangles) from 2, an octahedron (6, 8) below,
+// each as large in outline as the first (asLarge); `?lod=0` draws every ball the finest way.
+const fineBall = weld(new THREE.IcosahedronGeometry(1, 1));
+const BALL_LEVELS = [
+  { shape: fineBall, pixels: 5 },
+  { shape: asLarge(weld(new THREE.IcosahedronGeometry(1, 0)), fineBall), pixels: 2 },
+  { shape: asLarge(weld(new THREE.OctahedronGeometry(1, 0)), fineBall), pixels: 0 },
+];
 const boxMaterial = new THREE.MeshBasicMaterial({ vertexColors: true });
 boxMaterial.onBeforeCompile = (shader) => {
   shader.vertexShader = shader.vertexShader.replace('#include <color_pars_vertex>', 'flat varying vec3 vColor;');
   shader.fragmentShader = shader.fragmentShader.replace('#include <color_pars_fragment>', 'flat varying vec3 vColor;');
 };
 const ballMaterial = new THREE.MeshBasicMaterial({ vertexColors: true });
-let boxes = null, balls = null;           // Bodies of each shape, grown as needed
+// Bodies of each kind, grown as needed: boxes, then balls by level of detail.
+const KINDS = [boxShape, ...BALL_LEVELS.map((l) => l.shape)];
+const sets = KINDS.map(() => null);
 let flashMesh = null;                     // cells flashing after a rollback
 const flash = new Map();                  // cell -> intensity
 let lastRecomputes = null, lastOwners = null;   // per cell, in the frame drawn before
@@ -108,7 +120,25 @@ function weld(geometry) {
   }
   const triangles = geometry.index ? Array.from(geometry.index.array, (i) => index[i]) : index;
   geometry.dispose();
-  return { corners: new Float32Array(corners), vertices: corners.length / 3, triangles, face: null };
+  return { corners: new Float32Array(corners), normals: new Float32Array(corners), vertices: corners.length / 3, triangles, face: null, extent: 1 };
+}
+
+// The ball `shape` (corners on the unit sphere) grown to the surface area of `like`: a convex
+// body's outline has on average a quarter of its surface's area (Cauchy), so a coarse ball
+// covers as many pixels as the fine one, where an inscribed octahedron looks thin. Normals
+// stay those of the sphere.
+function asLarge(shape, like) {
+  const area = (s) => {
+    let a = 0;
+    const c = s.corners, t = s.triangles, v = new THREE.Vector3(), u = new THREE.Vector3(), w = new THREE.Vector3();
+    for (let j = 0; j < t.length; j += 3) {
+      v.fromArray(c, t[j] * 3); u.fromArray(c, t[j + 1] * 3).sub(v); w.fromArray(c, t[j + 2] * 3).sub(v);
+      a += u.cross(w).length() / 2;
+    }
+    return a;
+  };
+  const k = Math.sqrt(area(like) / area(shape));
+  return { ...shape, corners: shape.corners.map((x) => x * k), extent: k };
 }
 
 // World colours, made once per (world, asleep): a frame of 8,000 bodies allocates none.
@@ -193,8 +223,9 @@ class Bodies {
         col[o + 2] = byte(cb * (LIGHT.eb + LIGHT.db * w + d));
       }
     } else {
+      const nm = this.shape.normals;
       for (let i = 0, o = k * n * 3; i < n * 3; i += 3, o += 3) {
-        const x = c[i], y = c[i + 1], z = c[i + 2];   // a unit sphere's corner is its normal
+        const x = nm[i], y = nm[i + 1], z = nm[i + 2];   // the corner's normal (on the unit sphere)
         const nx = r0 * x + r4 * y + r8 * z, ny = r1 * x + r5 * y + r9 * z, nz = r2 * x + r6 * y + r10 * z;
         const w = 0.5 * ny + 0.5, d = Math.max(0, nx * SUN.x + ny * SUN.y + nz * SUN.z) * LIGHT.sun;
         col[o] = byte(cr * (LIGHT.er + LIGHT.dr * w + d));
@@ -340,7 +371,18 @@ const m4 = new THREE.Matrix4();
 const white = new THREE.Color(0xffffff);
 let ids = new Float64Array(0);
 const occlusion = new Occlusion(256);
-const rotations = { r: new Float64Array(0) };
+const rotations = { r: new Float64Array(0) }, kinds = { k: new Uint8Array(0) };
+
+// Which of BALL_LEVELS draws a ball of `radius` at (x, y, z) (view matrix v, canvas pixels
+// per unit of height at distance 1: perPixel).
+function ballLevel(x, y, z, radius, v, perPixel) {
+  const depth = -(v[2] * x + v[6] * y + v[10] * z + v[14]);
+  if (!soda.lod || depth <= radius) return 0;
+  const pixels = radius * perPixel / depth;
+  let level = 0;
+  while (pixels < BALL_LEVELS[level].pixels) level++;
+  return level;
+}
 
 // Writes the bodies of frame f that the camera can see (all with `?cull=0`) straight from
 // its bytes into the meshes' vertex arrays. Runs for every frame drawn and whenever the
@@ -349,44 +391,48 @@ function placeBodies(f) {
   const n = f.bodies;
   const u8 = new Uint8Array(f.view.buffer, f.bodyOffset, n * BODY);
   const u16 = new Uint16Array(f.view.buffer, f.bodyOffset, n * BODY / 2);
-  const u32 = new Uint32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
   const f32 = new Float32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
   if (rotations.r.length < n * 9) rotations.r = new Float64Array(n * 9);
   const rot = rotations.r;
   // Every body is measured against the camera, then each is decided (web/occlusion.js).
-  if (soda.cull) {
-    camera.updateMatrixWorld();
-    occlusion.begin(camera, n);
-  }
-  let nb = 0;
+  // Each body's kind (KINDS: a box, or a ball's level of detail; 255 when hidden).
+  camera.updateMatrixWorld();
+  if (kinds.k.length < n) kinds.k = new Uint8Array(n);
+  const kind = kinds.k, count = KINDS.map(() => 0);
+  const v = camera.matrixWorldInverse.elements, perPixel = renderer.domElement.height * camera.projectionMatrix.elements[5] / 2;
+  if (soda.cull) occlusion.begin(camera, n);
   for (let i = 0; i < n; i++) {
     const w = i * (BODY / 4), box = u8[i * BODY + 10] === 1;
-    if (box) nb++;
     rotationOf(f32[w + 6], f32[w + 7], f32[w + 8], f32[w + 9], rot, i * 9);
+    kind[i] = box ? 0 : 1 + ballLevel(f32[w + 3], f32[w + 4], f32[w + 5], f32[w + 10], v, perPixel);
     if (soda.cull) {
-      occlusion.body(i, f32[w + 3], f32[w + 4], f32[w + 5], box ? rot : null, i * 9, f32[w + 10], f32[w + 11], f32[w + 12], f32[w + 10]);
+      // A coarse ball reaches beyond the sphere (asLarge): its own extent bounds it.
+      occlusion.body(i, f32[w + 3], f32[w + 4], f32[w + 5], box ? rot : null, i * 9, f32[w + 10], f32[w + 11], f32[w + 12],
+        f32[w + 10] * KINDS[kind[i]].extent);
     }
   }
   if (soda.cull) occlusion.finish();
-  boxes = ensureCapacity(boxes, boxShape, boxMaterial, nb);
-  balls = ensureCapacity(balls, ballShape, ballMaterial, n - nb);
-  const next = [0, 0];
+  for (let i = 0; i < n; i++) {
+    if (soda.cull && occlusion.hidden(i)) kind[i] = 255;
+    else count[kind[i]]++;
+  }
+  KINDS.forEach((shape, k) => { sets[k] = ensureCapacity(sets[k], shape, k === 0 ? boxMaterial : ballMaterial, count[k]); });
+  const next = KINDS.map(() => 0);
   const selected = soda.selected;
   for (let i = 0; i < n; i++) {
-    if (soda.cull && occlusion.hidden(i)) continue;
+    if (kind[i] === 255) continue;
     const w = i * (BODY / 4);
     const id = ids[i];
-    const world = u16[w * 2 + 4], kind = u8[i * BODY + 10] === 1 ? 0 : 1, asleep = u8[i * BODY + 11] === 1;
-    const into = kind === 0 ? boxes : balls, k = next[kind]++;
+    const world = u16[w * 2 + 4], asleep = u8[i * BODY + 11] === 1;
+    const into = sets[kind[i]], k = next[kind[i]]++;
     into.ids[k] = id;
     into.place(k, f32[w + 3], f32[w + 4], f32[w + 5], rot, i * 9,
       f32[w + 10], f32[w + 11], f32[w + 12], id === selected ? white : palette(world, f.worlds, asleep),
-      kind === 0 && soda.cull ? occlusion.faces(i) : 63);
+      kind[i] === 0 && soda.cull ? occlusion.faces(i) : 63);
   }
-  soda.triangles = (boxes.listed + balls.listed) / 3;
-  boxes.finish(next[0]);
-  balls.finish(next[1]);
-  soda.drawn = next[0] + next[1];
+  soda.triangles = sets.reduce((t, b) => t + b.listed, 0) / 3;
+  sets.forEach((b, k) => b.finish(next[k]));
+  soda.drawn = next.reduce((a, b) => a + b, 0);
 }
 
 // Takes frame f as the one shown: its body ids, the cells' flashes, the panel and timeline
@@ -538,7 +584,7 @@ function pick(event) {
   const r = renderer.domElement.getBoundingClientRect();
   pointer.set(((event.clientX - r.left) / r.width) * 2 - 1, -((event.clientY - r.top) / r.height) * 2 + 1);
   raycaster.setFromCamera(pointer, camera);
-  const shapes = [boxes, balls].filter((b) => b && b.count > 0);
+  const shapes = sets.filter((b) => b && b.count > 0);
   for (const b of shapes) if (!b.mesh.geometry.boundingSphere) b.mesh.geometry.computeBoundingSphere();
   const targets = shapes.map((b) => b.mesh);
   const ground = world3.getObjectByName('ground');
@@ -577,7 +623,7 @@ window.addEventListener('keydown', (e) => {
 // Where body `id` appears on the page, in CSS pixels (for tests and scripted demos); null
 // if it is not drawn (out of sight: see placeBodies).
 soda.screenPointOf = (id) => {
-  for (const b of [boxes, balls]) {
+  for (const b of sets) {
     const k = b ? b.slotOf(id) : -1;
     if (k < 0) continue;
     const p = new THREE.Vector3().fromArray(b.centres, k * 3).project(camera);
