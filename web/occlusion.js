@@ -18,8 +18,11 @@
 // marks would change nothing: every cell under it already holds a nearer bound). The order
 // only decides how much is culled, never whether a culled body could be seen.
 //
+// The same buffer, once all bodies are decided, tells which faces of a box in sight to
+// draw: those turned to the camera and not covered nearer than the face (faces()).
+//
 // Usage per frame: begin(camera, n), body() for each of the n bodies, finish(), then
-// hidden(i) for each.
+// hidden(i) and, for a box, faces(i) for each.
 const BUCKETS = 512;
 // Distances compare with this margin (metres): vertex positions reach the GL as float32.
 const MARGIN = 1e-3;
@@ -34,7 +37,7 @@ export class Occlusion {
     this.height = 0;
     this.depth = new Float32Array(0);   // per cell: nearest covering bound, Infinity if none
     this.rect = new Int32Array(0);      // per body: cells x0, y0, x1, y1 its outline touches
-    this.nearest = new Float64Array(0); // per body: distance from the camera to its nearest point, or −1: never hidden
+    this.nearest = new Float64Array(0); // per body: distance from the camera to its nearest point (0: around the camera), −1: partly behind the near plane
     this.outside = new Uint8Array(0);   // per body: 1 if wholly outside the view
     this.far = new Float64Array(0);     // per body: a box's bound for the cells it covers, 0: not an occluder
     this.corners = new Float64Array(0); // per body: its 8 projected corners, x and y in cells
