@@ -64,6 +64,7 @@ return { seconds: (now - c.t0) / 1000, raf: c.raf, shown: c.shown,
          gap_p50: gaps[Math.floor(gaps.length * 0.5)] || 0,
          gap_p95: gaps[Math.floor(gaps.length * 0.95)] || 0,
          draw_ms: s.drawMs, render_ms: s.renderMs, frames_received: s.frames,
+         in_sight: s.drawn === undefined ? null : s.drawn, triangles: s.triangles === undefined ? null : s.triangles,
          step: s.shown ? s.shown.step : null, buffered: s.shown ? s.shown.buffered : null,
          stats: window.sodaStats ? JSON.parse(JSON.stringify(window.sodaStats)) : null,
          canvas: [document.querySelector('canvas').width, document.querySelector('canvas').height],
@@ -226,6 +227,8 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
         "scale": (r["stats"] or {}).get("scale", 1),
         "stats": r["stats"],
         "buffered": r["buffered"],
+        "in_sight": r["in_sight"],
+        "triangles": r["triangles"],
         "gl": r["gl"],
     }
 

@@ -2,6 +2,7 @@
 // with three.js, and sends the user's acts back as JSON messages.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/OrbitControls.js';
+import { Occlusion } from './occlusion.js';
 
 const HEADER = 64, WORLD = 24, BODY = 52;
 const $ = (id) => document.getElementById(id);
@@ -10,7 +11,11 @@ const $ = (id) => document.getElementById(id);
 const soda = {
   scene: null, frames: 0, shown: null, outcomes: [], saved: null, selected: null,
   socket: null, ids: [],
-  drawMs: 0, renderMs: 0,   // the page's own cost per frame: decoding and instancing, and WebGL
+  drawMs: 0, renderMs: 0,   // the page's own cost per frame: decoding, culling and vertex writing; WebGL
+  // Bodies and box faces the camera cannot see are not sent to the GL (web/occlusion.js);
+  // `?cull=0` sends them all. `drawn`, `triangles`: how many were sent last time.
+  cull: new URLSearchParams(location.search).get('cull') !== '0', drawn: 0, triangles: 0,
+  lod: new URLSearchParams(location.search).get('lod') !== '0',   // coarser balls when small (BALL_LEVELS)
 };
 window.soda = soda;
 
@@ -36,16 +41,27 @@ world3.add(sun);
 // lit cubes took ~300 ms a frame (docs/performance.md, "The viewer page"). A box is its 8
 // corners, each face coloured by the light it gets through one corner that belongs to it
 // alone (a `flat` colour, taken from a triangle's last vertex); a ball is a low-poly
-// icosahedron (42 vertices) lit per vertex.
+// icosahedron (42 vertices, 80 triangles) lit per vertex, or, small on the screen, a coarser
+// one: BALL_LEVELS.
 const boxShape = boxWithFaceCorners();
-const ballShape = weld(new THREE.IcosahedronGeometry(1, 1));
+// A ball's shapes by its radius on the canvas (in its pixels): an icosahedron split once from
+// 5 pixels up, the icosahedron (12 vertices, 20 triangles) from 2, an octahedron (6, 8) below,
+// each as large in outline as the first (asLarge); `?lod=0` draws every ball the finest way.
+const fineBall = weld(new THREE.IcosahedronGeometry(1, 1));
+const BALL_LEVELS = [
+  { shape: fineBall, pixels: 5 },
+  { shape: asLarge(weld(new THREE.IcosahedronGeometry(1, 0)), fineBall), pixels: 2 },
+  { shape: asLarge(weld(new THREE.OctahedronGeometry(1, 0)), fineBall), pixels: 0 },
+];
 const boxMaterial = new THREE.MeshBasicMaterial({ vertexColors: true });
 boxMaterial.onBeforeCompile = (shader) => {
   shader.vertexShader = shader.vertexShader.replace('#include <color_pars_vertex>', 'flat varying vec3 vColor;');
   shader.fragmentShader = shader.fragmentShader.replace('#include <color_pars_fragment>', 'flat varying vec3 vColor;');
 };
 const ballMaterial = new THREE.MeshBasicMaterial({ vertexColors: true });
-let boxes = null, balls = null;           // Bodies of each shape, grown as needed
+// Bodies of each kind, grown as needed: boxes, then balls by level of detail.
+const KINDS = [boxShape, ...BALL_LEVELS.map((l) => l.shape)];
+const sets = KINDS.map(() => null);
 let flashMesh = null;                     // cells flashing after a rollback
 const flash = new Map();                  // cell -> intensity
 let lastRecomputes = null, lastOwners = null;   // per cell, in the frame drawn before
@@ -104,7 +120,25 @@ function weld(geometry) {
   }
   const triangles = geometry.index ? Array.from(geometry.index.array, (i) => index[i]) : index;
   geometry.dispose();
-  return { corners: new Float32Array(corners), vertices: corners.length / 3, triangles, face: null };
+  return { corners: new Float32Array(corners), normals: new Float32Array(corners), vertices: corners.length / 3, triangles, face: null, extent: 1 };
+}
+
+// The ball `shape` (corners on the unit sphere) grown to the surface area of `like`: a convex
+// body's outline has on average a quarter of its surface's area (Cauchy), so a coarse ball
+// covers as many pixels as the fine one, where an inscribed octahedron looks thin. Normals
+// stay those of the sphere.
+function asLarge(shape, like) {
+  const area = (s) => {
+    let a = 0;
+    const c = s.corners, t = s.triangles, v = new THREE.Vector3(), u = new THREE.Vector3(), w = new THREE.Vector3();
+    for (let j = 0; j < t.length; j += 3) {
+      v.fromArray(c, t[j] * 3); u.fromArray(c, t[j + 1] * 3).sub(v); w.fromArray(c, t[j + 2] * 3).sub(v);
+      a += u.cross(w).length() / 2;
+    }
+    return a;
+  };
+  const k = Math.sqrt(area(like) / area(shape));
+  return { ...shape, corners: shape.corners.map((x) => x * k), extent: k };
 }
 
 // World colours, made once per (world, asleep): a frame of 8,000 bodies allocates none.
@@ -122,6 +156,7 @@ function palette(world, worlds, asleep) {
 }
 
 // The bodies of one shape: capacity bodies, `count` drawn, slot k's vertices at k·vertices.
+// A box's triangles are listed face by face, only the faces to draw (place's `faces`).
 class Bodies {
   constructor(shape, material, capacity) {
     const v = shape.vertices, t = shape.triangles;
@@ -139,24 +174,23 @@ class Bodies {
     for (let k = 0, at = 0; k < capacity; k++) for (const i of t) index[at++] = k * v + i;
     geometry.setAttribute('position', positions);
     geometry.setAttribute('color', colors);
-    geometry.setIndex(new THREE.BufferAttribute(index, 1));
+    const indices = new THREE.BufferAttribute(index, 1);
+    indices.setUsage(THREE.DynamicDrawUsage);
+    geometry.setIndex(indices);
     geometry.setDrawRange(0, 0);
-    this.positions = positions; this.colors = colors;
+    this.positions = positions; this.colors = colors; this.indices = indices;
+    this.listed = 0;   // indices listed so far in this frame
     this.mesh = new THREE.Mesh(geometry, material);
     this.mesh.frustumCulled = false;
     world3.add(this.mesh);
   }
   dispose() { world3.remove(this.mesh); this.mesh.geometry.dispose(); }
-  // Writes slot k: the shape scaled by (sx, sy, sz), rotated by (qx, qy, qz, qw), moved to
-  // (px, py, pz), coloured `colour` as lit.
-  place(k, px, py, pz, qx, qy, qz, qw, sx, sy, sz, colour) {
-    const x2 = qx + qx, y2 = qy + qy, z2 = qz + qz;
-    const xx = qx * x2, xy = qx * y2, xz = qx * z2, yy = qy * y2, yz = qy * z2, zz = qz * z2;
-    const wx = qw * x2, wy = qw * y2, wz = qw * z2;
-    // The rotation's columns: where the body's x, y and z axes point.
-    const r0 = 1 - (yy + zz), r1 = xy + wz, r2 = xz - wy;
-    const r4 = xy - wz, r5 = 1 - (xx + zz), r6 = yz + wx;
-    const r8 = xz + wy, r9 = yz - wx, r10 = 1 - (xx + yy);
+  // Writes slot k: the shape scaled by (sx, sy, sz), rotated by r[at..at + 9] (rotationOf),
+  // moved to (px, py, pz), coloured `colour` as lit; a box lists its faces in the bits of
+  // `faces` (1 << f for f = +x, −x, +y, −y, +z, −z; Occlusion.faces).
+  place(k, px, py, pz, r, at, sx, sy, sz, colour, faces) {
+    const r0 = r[at], r1 = r[at + 1], r2 = r[at + 2], r4 = r[at + 3], r5 = r[at + 4], r6 = r[at + 5];
+    const r8 = r[at + 6], r9 = r[at + 7], r10 = r[at + 8];
     const m0 = r0 * sx, m1 = r1 * sx, m2 = r2 * sx, m4 = r4 * sy, m5 = r5 * sy, m6 = r6 * sy;
     const m8 = r8 * sz, m9 = r9 * sz, m10 = r10 * sz;
     const c = this.shape.corners, out = this.positions.array, col = this.colors.array, n = this.shape.vertices;
@@ -167,6 +201,16 @@ class Bodies {
       out[o + 2] = m2 * x + m6 * y + m10 * z + pz;
     }
     const face = this.shape.face, cr = colour.r, cg = colour.g, cb = colour.b;
+    const t = this.shape.triangles, index = this.indices.array;
+    if (face) {
+      // Face f's two triangles are t[6f..6f + 6].
+      for (let f = 0; f < 6; f++) {
+        if (!(faces & (1 << f))) continue;
+        for (let j = f * 6; j < f * 6 + 6; j++) index[this.listed++] = k * n + t[j];
+      }
+    } else {
+      this.listed += t.length;   // a ball's triangles stay where the constructor listed them
+    }
     if (face) {
       // Face f's normal is ± a rotation column; its colour goes on its own corner.
       for (let f = 0; f < 6; f++) {
@@ -179,8 +223,9 @@ class Bodies {
         col[o + 2] = byte(cb * (LIGHT.eb + LIGHT.db * w + d));
       }
     } else {
+      const nm = this.shape.normals;
       for (let i = 0, o = k * n * 3; i < n * 3; i += 3, o += 3) {
-        const x = c[i], y = c[i + 1], z = c[i + 2];   // a unit sphere's corner is its normal
+        const x = nm[i], y = nm[i + 1], z = nm[i + 2];   // the corner's normal (on the unit sphere)
         const nx = r0 * x + r4 * y + r8 * z, ny = r1 * x + r5 * y + r9 * z, nz = r2 * x + r6 * y + r10 * z;
         const w = 0.5 * ny + 0.5, d = Math.max(0, nx * SUN.x + ny * SUN.y + nz * SUN.z) * LIGHT.sun;
         col[o] = byte(cr * (LIGHT.er + LIGHT.dr * w + d));
@@ -190,11 +235,11 @@ class Bodies {
     }
     this.centres[k * 3] = px; this.centres[k * 3 + 1] = py; this.centres[k * 3 + 2] = pz;
   }
-  // Draws the first `count` slots.
+  // Draws the first `count` slots (their listed triangles); the next frame lists anew.
   finish(count) {
     const n = this.shape.vertices;
     this.count = count;
-    this.mesh.geometry.setDrawRange(0, count * this.shape.triangles.length);
+    this.mesh.geometry.setDrawRange(0, this.listed);
     if (count > 0) {
       for (const a of [this.positions, this.colors]) {
         a.clearUpdateRanges();
@@ -202,6 +247,12 @@ class Bodies {
         a.needsUpdate = true;
       }
     }
+    if (this.shape.face && this.listed > 0) {
+      this.indices.clearUpdateRanges();
+      this.indices.addUpdateRange(0, this.listed);
+      this.indices.needsUpdate = true;
+    }
+    this.listed = 0;
     this.mesh.geometry.boundingSphere = null;   // recomputed when picking
   }
   slotOf(id) {
@@ -214,6 +265,17 @@ const LIGHT = {
   dr: (SKY.r - EARTH.r) * 1.6 / Math.PI, dg: (SKY.g - EARTH.g) * 1.6 / Math.PI, db: (SKY.b - EARTH.b) * 1.6 / Math.PI,
   sun: 1.8 / Math.PI,
 };
+
+// The rotation of the unit quaternion (qx, qy, qz, qw) as its columns, written into
+// out[at..at + 9]: where the body's x (the first 3), y and z axes point.
+function rotationOf(qx, qy, qz, qw, out, at) {
+  const x2 = qx + qx, y2 = qy + qy, z2 = qz + qz;
+  const xx = qx * x2, xy = qx * y2, xz = qx * z2, yy = qy * y2, yz = qy * z2, zz = qz * z2;
+  const wx = qw * x2, wy = qw * y2, wz = qw * z2;
+  out[at] = 1 - (yy + zz); out[at + 1] = xy + wz; out[at + 2] = xz - wy;
+  out[at + 3] = xy - wz; out[at + 4] = 1 - (xx + zz); out[at + 5] = yz + wx;
+  out[at + 6] = xz + wy; out[at + 7] = yz - wx; out[at + 8] = 1 - (xx + yy);
+}
 
 function ensureCapacity(bodies, shape, material, n) {
   if (bodies && bodies.capacity >= n) return bodies;
@@ -274,7 +336,7 @@ function setUpScene(s) {
 }
 
 // --- frames -------------------------------------------------------------------------------
-let pending = null;     // the latest frame received, not yet drawn
+let pending = null;     // the latest frame's bytes, not yet drawn (decoded only when drawn)
 
 function decode(buffer) {
   const v = new DataView(buffer);
@@ -308,34 +370,79 @@ function decode(buffer) {
 const m4 = new THREE.Matrix4();
 const white = new THREE.Color(0xffffff);
 let ids = new Float64Array(0);
+const occlusion = new Occlusion(256);
+const rotations = { r: new Float64Array(0) }, kinds = { k: new Uint8Array(0) };
 
-// Writes the frame's bodies straight from its bytes into the meshes' vertex arrays.
-function draw(f) {
+// Which of BALL_LEVELS draws a ball of `radius` at (x, y, z) (view matrix v, canvas pixels
+// per unit of height at distance 1: perPixel).
+function ballLevel(x, y, z, radius, v, perPixel) {
+  const depth = -(v[2] * x + v[6] * y + v[10] * z + v[14]);
+  if (!soda.lod || depth <= radius) return 0;
+  const pixels = radius * perPixel / depth;
+  let level = 0;
+  while (pixels < BALL_LEVELS[level].pixels) level++;
+  return level;
+}
+
+// Writes the bodies of frame f that the camera can see (all with `?cull=0`) straight from
+// its bytes into the meshes' vertex arrays. Runs for every frame drawn and whenever the
+// camera moves: what is hidden depends on both.
+function placeBodies(f) {
   const n = f.bodies;
   const u8 = new Uint8Array(f.view.buffer, f.bodyOffset, n * BODY);
   const u16 = new Uint16Array(f.view.buffer, f.bodyOffset, n * BODY / 2);
-  const u32 = new Uint32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
   const f32 = new Float32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
-  let nb = 0;
-  for (let i = 0; i < n; i++) if (u8[i * BODY + 10] === 1) nb++;
-  boxes = ensureCapacity(boxes, boxShape, boxMaterial, nb);
-  balls = ensureCapacity(balls, ballShape, ballMaterial, n - nb);
-  if (ids.length !== n) ids = new Float64Array(n);
-  const next = [0, 0];
+  if (rotations.r.length < n * 9) rotations.r = new Float64Array(n * 9);
+  const rot = rotations.r;
+  // Every body is measured against the camera, then each is decided (web/occlusion.js).
+  // Each body's kind (KINDS: a box, or a ball's level of detail; 255 when hidden).
+  camera.updateMatrixWorld();
+  if (kinds.k.length < n) kinds.k = new Uint8Array(n);
+  const kind = kinds.k, count = KINDS.map(() => 0);
+  const v = camera.matrixWorldInverse.elements, perPixel = renderer.domElement.height * camera.projectionMatrix.elements[5] / 2;
+  if (soda.cull) occlusion.begin(camera, n);
+  for (let i = 0; i < n; i++) {
+    const w = i * (BODY / 4), box = u8[i * BODY + 10] === 1;
+    rotationOf(f32[w + 6], f32[w + 7], f32[w + 8], f32[w + 9], rot, i * 9);
+    kind[i] = box ? 0 : 1 + ballLevel(f32[w + 3], f32[w + 4], f32[w + 5], f32[w + 10], v, perPixel);
+    if (soda.cull) {
+      // A coarse ball reaches beyond the sphere (asLarge): its own extent bounds it.
+      occlusion.body(i, f32[w + 3], f32[w + 4], f32[w + 5], box ? rot : null, i * 9, f32[w + 10], f32[w + 11], f32[w + 12],
+        f32[w + 10] * KINDS[kind[i]].extent);
+    }
+  }
+  if (soda.cull) occlusion.finish();
+  for (let i = 0; i < n; i++) {
+    if (soda.cull && occlusion.hidden(i)) kind[i] = 255;
+    else count[kind[i]]++;
+  }
+  KINDS.forEach((shape, k) => { sets[k] = ensureCapacity(sets[k], shape, k === 0 ? boxMaterial : ballMaterial, count[k]); });
+  const next = KINDS.map(() => 0);
   const selected = soda.selected;
   for (let i = 0; i < n; i++) {
+    if (kind[i] === 255) continue;
     const w = i * (BODY / 4);
-    const id = u32[w + 1] * 4294967296 + u32[w];
-    ids[i] = id;
-    const world = u16[w * 2 + 4], kind = u8[i * BODY + 10] === 1 ? 0 : 1, asleep = u8[i * BODY + 11] === 1;
-    const into = kind === 0 ? boxes : balls, k = next[kind]++;
+    const id = ids[i];
+    const world = u16[w * 2 + 4], asleep = u8[i * BODY + 11] === 1;
+    const into = sets[kind[i]], k = next[kind[i]]++;
     into.ids[k] = id;
-    into.place(k, f32[w + 3], f32[w + 4], f32[w + 5], f32[w + 6], f32[w + 7], f32[w + 8], f32[w + 9],
-      f32[w + 10], f32[w + 11], f32[w + 12], id === selected ? white : palette(world, f.worlds, asleep));
+    into.place(k, f32[w + 3], f32[w + 4], f32[w + 5], rot, i * 9,
+      f32[w + 10], f32[w + 11], f32[w + 12], id === selected ? white : palette(world, f.worlds, asleep),
+      kind[i] === 0 && soda.cull ? occlusion.faces(i) : 63);
   }
+  soda.triangles = sets.reduce((t, b) => t + b.listed, 0) / 3;
+  sets.forEach((b, k) => b.finish(next[k]));
+  soda.drawn = next.reduce((a, b) => a + b, 0);
+}
+
+// Takes frame f as the one shown: its body ids, the cells' flashes, the panel and timeline
+// (its bodies are placed by placeBodies, before the render).
+function draw(f) {
+  const n = f.bodies;
+  const u32 = new Uint32Array(f.view.buffer, f.bodyOffset, n * BODY / 4);
+  if (ids.length !== n) ids = new Float64Array(n);
+  for (let i = 0; i < n; i++) ids[i] = u32[i * (BODY / 4) + 1] * 4294967296 + u32[i * (BODY / 4)];
   soda.ids = ids;
-  boxes.finish(next[0]);
-  balls.finish(next[1]);
   // A cell flashes when a rollback reached it since the frame drawn before: its count of
   // re-executed computations grew (a cell that changed owner restarts its count: no flash).
   if (lastRecomputes && lastRecomputes.length === f.cells) {
@@ -389,7 +496,7 @@ function drawPanel() {
   const seconds = f.buffered / (soda.scene.fps * f.speed);
   $('buffer').textContent = `${f.buffered} frames, ${seconds.toFixed(2)} s`;
   $('starved').textContent = `${f.starved} ticks`;
-  $('bodies').textContent = f.bodies;
+  $('bodies').textContent = soda.cull ? `${f.bodies} (${soda.drawn} in sight)` : f.bodies;
   $('speed').textContent = `${+f.speed.toFixed(3)}×`;
   $('pause').textContent = f.paused ? 'resume' : 'pause';
 }
@@ -451,7 +558,8 @@ function connect() {
       else if (m.type === 'saved') { soda.saved = m; say(`saved at step ${m.step}, hash ${m.hash}:\n${m.command}`); }
       return;
     }
-    try { pending = decode(e.data); soda.frames++; } catch (err) { say(String(err)); }
+    pending = e.data;
+    soda.frames++;
   };
   socket.onclose = () => setTimeout(connect, 1000);
 }
@@ -476,7 +584,7 @@ function pick(event) {
   const r = renderer.domElement.getBoundingClientRect();
   pointer.set(((event.clientX - r.left) / r.width) * 2 - 1, -((event.clientY - r.top) / r.height) * 2 + 1);
   raycaster.setFromCamera(pointer, camera);
-  const shapes = [boxes, balls].filter((b) => b && b.count > 0);
+  const shapes = sets.filter((b) => b && b.count > 0);
   for (const b of shapes) if (!b.mesh.geometry.boundingSphere) b.mesh.geometry.computeBoundingSphere();
   const targets = shapes.map((b) => b.mesh);
   const ground = world3.getObjectByName('ground');
@@ -512,9 +620,10 @@ window.addEventListener('keydown', (e) => {
   else if (e.key === '-') setSpeed(speed / 2);
 });
 
-// Where body `id` appears on the page, in CSS pixels (for tests and scripted demos).
+// Where body `id` appears on the page, in CSS pixels (for tests and scripted demos); null
+// if it is not drawn (out of sight: see placeBodies).
 soda.screenPointOf = (id) => {
-  for (const b of [boxes, balls]) {
+  for (const b of sets) {
     const k = b ? b.slotOf(id) : -1;
     if (k < 0) continue;
     const p = new THREE.Vector3().fromArray(b.centres, k * 3).project(camera);
@@ -527,7 +636,7 @@ soda.screenPointOf = (id) => {
 // --- render loop ------------------------------------------------------------------------------
 // The page draws when a new frame came, the camera moved, a flash fades or the page was
 // resized, not on every animation frame. Its own cost is in window.sodaStats: animation
-// frames per second, frames drawn per second, draw() (vertex writing; decoding is in onmessage) and render ms per frame
+// frames per second, frames drawn per second, the page's JS per frame drawn (decoding, culling, vertex writing) and render ms per frame
 // (averages), and the render scale: the canvas has scale × the CSS pixels. With `auto`
 // (the default; `?scale=0.5` fixes it), the scale drops a step each second the page draws
 // fewer than 55 frames/s while frames keep coming, down to 25 %, and climbs back a step after
@@ -570,17 +679,26 @@ function adapt(now) {
   if (!panelFrame && soda.shown) panelFrame = lastFrame;
 }
 let lastFrame = null;
+// The bodies are placed again when a new frame came or the camera moved or the page resized.
+let placeAgain = false;
+controls.addEventListener('change', () => { placeAgain = true; });
+window.addEventListener('resize', () => { placeAgain = true; });
 function loop(now) {
   stats.ticks++;
+  const t0 = performance.now();
   if (pending && soda.scene) {
-    const t0 = performance.now();
-    draw(pending);
-    lastFrame = pending;
+    let f = null;
+    try { f = decode(pending); } catch (err) { say(String(err)); }
     pending = null;
+    if (f) { draw(f); lastFrame = f; placeAgain = true; }
+  }
+  if (controls.update()) placeAgain = true;
+  if (placeAgain && lastFrame) {
+    placeAgain = false;
+    placeBodies(lastFrame);
     soda.drawMs = soda.drawMs * 0.9 + (performance.now() - t0) * 0.1;
     needRender = true;
   }
-  if (controls.update()) needRender = true;
   if (flash.size > 0 && !needRender) { drawFlashes(); needRender = true; }
   if (needRender) {
     needRender = false;
@@ -596,3 +714,14 @@ function loop(now) {
 }
 requestAnimationFrame(loop);
 connect();
+
+// Places the bodies and renders at once, in this task (tests and tools compare the pixels
+// with and without culling: the canvas can be read until the task ends).
+soda.camera = camera;
+soda.controls = controls;
+soda.renderNow = () => {
+  camera.updateMatrixWorld();
+  if (lastFrame) placeBodies(lastFrame);
+  renderer.render(world3, camera);
+  return renderer.domElement;
+};

@@ -6,6 +6,8 @@
 pub const INDEX_HTML: &str = include_str!("../../../web/index.html");
 /// The page's script.
 pub const APP_JS: &str = include_str!("../../../web/app.js");
+/// The page's occlusion culling (imported by the script).
+pub const OCCLUSION_JS: &str = include_str!("../../../web/occlusion.js");
 /// Where the page loads three.js from (its import map names it).
 pub const THREE_PATH: &str = "/vendor/three-0.170.0/three.module.min.js";
 /// three.js 0.170.0.

@@ -53,6 +53,10 @@ pub fn serve(listener: std::net::TcpListener, state: Arc<ViewerState>) -> std::i
                 get(|| async { page(assets::APP_JS, "text/javascript") }),
             )
             .route(
+                "/occlusion.js",
+                get(|| async { page(assets::OCCLUSION_JS, "text/javascript") }),
+            )
+            .route(
                 assets::THREE_PATH,
                 get(|| async { page(assets::THREE_JS, "text/javascript") }),
             )
