@@ -5,7 +5,7 @@
 //! Each substep: a plastic impact pass at velocity level (sequential impulses over the
 //! body's points, so a landing stops the approach without bouncing or spinning), a
 //! position pass that removes what penetration is left, and a velocity pass (restitution,
-//! Coulomb friction, separation cap). The body's world inverse inertia is a 3×3 matrix
+//! Coulomb friction, separation cap, torsional friction). The body's world inverse inertia is a 3×3 matrix
 //! computed once per pass, and rotations inside a pass are linearised (`r + δθ × r`).
 
 use super::body::Body;
@@ -101,6 +101,17 @@ fn offset(body: &Body, rot: &Matrix3<f32>, cp: &ContactPoint) -> Vec3 {
         Shape::Ball { radius } => -cp.normal * radius,
         Shape::Cuboid { .. } => rot * cp.anchor,
     }
+}
+
+/// Whether some point of `set` approaches its partner at `body`'s velocities (relative to the
+/// point's partner velocity): a carried set (SPEC.md §5.2) acts only then.
+pub(crate) fn approaches(body: &Body, set: &ContactSet) -> bool {
+    let rot = body.rotation.to_rotation_matrix().into_inner();
+    set.points.iter().any(|cp| {
+        let r = offset(body, &rot, cp);
+        let v = body.linvel + body.angvel.cross(&r);
+        cp.normal.dot(&(v - cp.partner_velocity)) < 0.0
+    })
 }
 
 /// The part of the spin change `dw` (from a position correction) that only cancels spin:
@@ -327,7 +338,7 @@ pub(crate) fn solve_body(
         let mut sum_dx = Vec3::zeros();
         let mut sum_dtheta = Vec3::zeros();
         let mut active = 0u32;
-        // Pile contacts (`ContactSet::shared`): the body's share of each overlap, added whole.
+        // Pile contacts (`SetRole::Pile`): the body's share of each overlap, added whole.
         let mut shared_dx = Vec3::zeros();
         let mut shared_dtheta = Vec3::zeros();
         let mut k = 0;

@@ -1,7 +1,7 @@
 //! The built-in scenes, seeded and sized by parameters.
 
 use super::{BodySpec, Scene, SceneBuilder, SceneError};
-use crate::physics::{Material, Shape};
+use crate::physics::{Material, Shape, SolverParams};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -194,7 +194,8 @@ pub const PEAK_DROP_HEIGHT: f32 = 11.5;
 
 /// The peak scene: `n − ⌈2n/3⌉` balls (radius 0.4 m) resting on a square lattice (1.5 m
 /// apart) and spinning about the vertical at 2 rad/s — their contact point does not slip,
-/// so they never slow down or fall asleep: a steady load on every territory — and, above the
+/// and the scene turns torsional friction off (`patch_radius` 0, SPEC.md §5.3), so they never
+/// slow down or fall asleep: a steady load on every territory — and, above the
 /// centre of the (+x, +z) quadrant, a block of `⌈2n/3⌉` unit cubes (the falling-cubes
 /// lattice, jittered by `rng`) whose lowest layer starts at [`PEAK_DROP_HEIGHT`]. The floor
 /// is left clear 2 m around the block's footprint, so the landing stays in that quadrant;
@@ -226,7 +227,11 @@ fn peak(n: usize, rng: &mut ChaCha8Rng) -> SceneBuilder {
     let centre = s as f32 * SPACING / 4.0;
     let top = PEAK_DROP_HEIGHT + (layers as f32 - 1.0) * 1.2 + 0.5;
     let mut b = SceneBuilder::new([-half, -1.0, -half], [half, top + 5.0, half])
-        .environment_material(0.5, 0.0);
+        .environment_material(0.5, 0.0)
+        .solver(SolverParams {
+            patch_radius: 0.0,
+            ..SolverParams::default()
+        });
     b.reserve(n);
     let material = Material::default();
     for (k, p) in sites(s).into_iter().take(balls).enumerate() {
