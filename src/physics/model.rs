@@ -659,8 +659,12 @@ impl CellModel for RigidBodyModel {
                 // Sized for the whole neighbourhood up front: a filtered collect grows by
                 // reallocation (4, 8, 16, ... candidates), a measurable share of a step.
                 candidates.reserve_exact(nb.cells.iter().map(|c| c.len()).sum());
+                // All six comparisons, then one branch: which of them fails first is
+                // unpredictable in a gas (the same comparisons of the same numbers).
                 let within = |p: [f32; 3], r: f32| {
-                    (0..3).all(|k| p[k] >= lo[k] - grow - r && p[k] <= hi[k] + grow + r)
+                    (0..3).fold(true, |ok, k| {
+                        ok & (p[k] >= lo[k] - grow - r) & (p[k] <= hi[k] + grow + r)
+                    })
                 };
                 for row in 0..9 {
                     let slots = &nb.cells[3 * row..3 * row + 3];
