@@ -48,9 +48,10 @@ impl<S: Clone> CellStates<S> {
     }
 
     /// Replaces this state by `states` binned as [`CellStates::binned`] does (the same
-    /// cells in the same order, the same events), reusing this state's allocations, and
-    /// returns its previous entity vector emptied (its capacity kept) for the caller to fill
-    /// with the next states: stepping a million entities then allocates no new memory.
+    /// cells in the same order, the same events), reusing this state's allocations (the
+    /// binned entities are copied into its previous entity vector), and returns the vector
+    /// `states` came in, emptied (its capacity kept), for the caller to fill with the next
+    /// states: stepping a million entities then allocates no new memory.
     ///
     /// # Panics
     /// With more than `u32::MAX` entities.
@@ -78,11 +79,43 @@ impl<S: Clone> CellStates<S> {
         scratch: &mut Scratch,
     ) -> Vec<S> {
         let starts = std::mem::take(&mut self.starts);
-        let binned = Self::bin::<M>(grid, states, starts, &mut scratch.target, step, events);
-        let old = std::mem::replace(self, binned);
-        let mut entities = old.entities;
-        entities.clear();
-        entities
+        let old = std::mem::take(&mut self.entities);
+        let (binned, mut spare) =
+            Self::bin_into::<M>(grid, states, old, starts, &mut scratch.target, step, events);
+        *self = binned;
+        spare.clear();
+        spare
+    }
+
+    /// [`CellStates::bin`] with the binned entities copied into `into` (its contents are
+    /// overwritten, its allocation reused) instead of moved in place: one copy of each
+    /// entity to its index, no chains of swaps. Returns the state and the vector `states`
+    /// came in (for the caller to reuse).
+    fn bin_into<M: CellModel<State = S>>(
+        grid: &Grid,
+        mut states: Vec<S>,
+        mut into: Vec<S>,
+        starts: Vec<u32>,
+        target: &mut Vec<u32>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+    ) -> (Self, Vec<S>) {
+        let starts = Self::targets::<M>(grid, &mut states, starts, target, step, events);
+        // Any entities, as many as `states`, then each overwritten by the one it receives.
+        into.truncate(states.len());
+        let short = states.len() - into.len();
+        into.extend_from_slice(&states[..short]);
+        for (s, &t) in states.iter().zip(target.iter()) {
+            into[t as usize] = s.clone();
+        }
+        Self::sort_cells::<M>(&mut into, &starts);
+        (
+            CellStates {
+                entities: into,
+                starts,
+            },
+            states,
+        )
     }
 
     /// Bins `entities` into a state whose cell starts reuse the allocation of `starts`;
@@ -90,11 +123,45 @@ impl<S: Clone> CellStates<S> {
     fn bin<M: CellModel<State = S>>(
         grid: &Grid,
         mut entities: Vec<S>,
-        mut starts: Vec<u32>,
+        starts: Vec<u32>,
         target: &mut Vec<u32>,
         step: Step,
         events: &mut Vec<Event<M::Event>>,
     ) -> Self {
+        let starts = Self::targets::<M>(grid, &mut entities, starts, target, step, events);
+        // Moves every entity to its index, one cycle of the permutation at a time.
+        for i in 0..entities.len() {
+            while target[i] as usize != i {
+                let j = target[i] as usize;
+                entities.swap(i, j);
+                target.swap(i, j);
+            }
+        }
+        Self::sort_cells::<M>(&mut entities, &starts);
+        CellStates { entities, starts }
+    }
+
+    /// Sorts each cell's entities by id (`starts` as in a state).
+    fn sort_cells<M: CellModel<State = S>>(entities: &mut [S], starts: &[u32]) {
+        for w in starts.windows(2) {
+            if w[1] - w[0] > 1 {
+                entities[w[0] as usize..w[1] as usize].sort_by_key(|s| M::id(s));
+            }
+        }
+    }
+
+    /// Drops the entities outside the grid (a [`LeftGrid`] event each, in the order given)
+    /// and sets `target` to each remaining entity's index in the binned state (cell by
+    /// cell in linear order, each cell in the order given); returns the cell starts, in the
+    /// allocation of `starts`.
+    fn targets<M: CellModel<State = S>>(
+        grid: &Grid,
+        entities: &mut Vec<S>,
+        mut starts: Vec<u32>,
+        target: &mut Vec<u32>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+    ) -> Vec<u32> {
         u32::try_from(entities.len()).expect("more than u32::MAX entities");
         // Each entity's cell, then (below) its index in the result.
         target.clear();
@@ -133,20 +200,7 @@ impl<S: Clone> CellStates<S> {
             *slot += 1;
         }
         starts.pop();
-        // Moves every entity to its index, one cycle of the permutation at a time.
-        for i in 0..entities.len() {
-            while target[i] as usize != i {
-                let j = target[i] as usize;
-                entities.swap(i, j);
-                target.swap(i, j);
-            }
-        }
-        for w in starts.windows(2) {
-            if w[1] - w[0] > 1 {
-                entities[w[0] as usize..w[1] as usize].sort_by_key(|s| M::id(s));
-            }
-        }
-        CellStates { entities, starts }
+        starts
     }
 
     /// The entities homed in cell `c` (sorted by id); empty outside the grid.
@@ -262,8 +316,8 @@ impl<S: Clone> CellStates<S> {
     /// Replaces the cells `computed` (linear indices, ascending) by `outputs`: the result
     /// is what [`CellStates::rebin`] gives for the entities of every other cell followed by
     /// `outputs` (each entity binned to the cell its position lies in, every cell sorted by
-    /// id, [`LeftGrid`] events for entities outside the grid). Returns the previous entity
-    /// vector, emptied, as `rebin` does.
+    /// id, [`LeftGrid`] events for entities outside the grid). Returns an entity
+    /// vector to fill next, emptied, as `rebin` does.
     ///
     /// The kept entities are appended to `outputs` (its capacity reused, no new vector):
     /// a cell's entities have unique ids and end sorted by id, so the order they are given

@@ -26,8 +26,9 @@ pub struct ReferenceRun<M: CellModel> {
     inputs: BTreeMap<Step, Vec<Input<M::State>>>,
     /// Whether every step is checked against the model contract ([`contract`]).
     check: bool,
-    /// The previous state's entity vector, emptied: the next step's states go into it (no
-    /// new allocation of a state's size each step).
+    /// An emptied entity vector kept from the previous step (the previous state's or the
+    /// one its outputs came in): the next step's states go into it (no new allocation of
+    /// a state's size each step).
     spare: Vec<M::State>,
     /// Per cell (linear index): whether every entity of its state is at rest
     /// ([`CellModel::at_rest`]; an empty cell is). Kept for the current state.
