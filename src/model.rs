@@ -13,6 +13,10 @@ pub type Step = u64;
 /// The identity of an entity (a body). Canonical order everywhere is ascending id.
 pub type BodyId = u64;
 
+/// Four words a model computes from one entity's state ([`CellModel::hint`]) that its
+/// `step_cell` may read instead of computing them again, once per neighbourhood.
+pub type Hint = [f32; 4];
+
 /// The states of the entities homed in the 27 cells around a centre cell at one step.
 ///
 /// Slot `k` holds cell `centre + offset(k)` with offsets in lexicographic `(dz, dy, dx)`
@@ -23,11 +27,32 @@ pub struct Neighbourhood<'a, S> {
     pub centre: CellCoord,
     /// The 27 slots, see the type's doc.
     pub cells: [&'a [S]; 27],
+    /// Per row of three slots along x (row `r` holds slots `3r`, `3r + 1` and `3r + 2`),
+    /// either the [`CellModel::hint`] of each of the row's entities, in slot order (as
+    /// long as the three slots together), or nothing (an empty slice): an executor may
+    /// give hints for some rows, all or none.
+    pub hints: [&'a [Hint]; 9],
 }
 
 impl<'a, S> Neighbourhood<'a, S> {
     /// Index of the centre slot.
     pub const CENTRE: usize = 13;
+
+    /// The neighbourhood of `centre` with these slots and no hints.
+    pub fn new(centre: CellCoord, cells: [&'a [S]; 27]) -> Self {
+        Neighbourhood {
+            centre,
+            cells,
+            hints: [&[]; 9],
+        }
+    }
+
+    /// The hints of row `r`'s entities (slots `3r..3r + 3`), if the executor gave them.
+    pub fn row_hints(&self, r: usize) -> Option<&'a [Hint]> {
+        let hints = self.hints[r];
+        let len: usize = self.cells[3 * r..3 * r + 3].iter().map(|c| c.len()).sum();
+        (hints.len() == len && len > 0).then_some(hints)
+    }
 
     /// The offset `(dx, dy, dz)` of slot `k`.
     pub fn offset(k: usize) -> [i32; 3] {
@@ -110,6 +135,18 @@ pub trait CellModel: Send + Sync {
         out: &mut Vec<Self::State>,
         events: &mut Vec<Event<Self::Event>>,
     );
+
+    /// Four words about `state` that [`step_cell`](Self::step_cell) may read from the
+    /// neighbourhood ([`Neighbourhood::hints`]) instead of computing them itself: a pure
+    /// function of the state and the model's static data, which an executor may compute
+    /// once per entity and step rather than once per neighbourhood that holds it. Whether
+    /// hints are given must not change any output (`step_cell` computes what is missing;
+    /// the contract checker computes every cell a second time without hints). `None`, the
+    /// default: the model reads none, and executors compute none.
+    fn hint(&self, state: &Self::State) -> Option<Hint> {
+        let _ = state;
+        None
+    }
 
     /// Whether computing the cell that homes `reader` may read `other`, the state of an
     /// entity homed in a neighbouring cell at the same step. `false` is a promise: a cell's

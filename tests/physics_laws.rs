@@ -892,7 +892,7 @@ fn a_non_finite_state_is_a_hard_error_naming_body_step_and_field() {
     let centre = grid.cell_of([0.0; 3]).unwrap();
     let mut cells: [&[Body]; 27] = [&[]; 27];
     cells[Neighbourhood::<Body>::CENTRE] = &own;
-    let nb = Neighbourhood { centre, cells };
+    let nb = Neighbourhood::new(centre, cells);
     let err = std::panic::catch_unwind(|| {
         let (mut out, mut events) = (Vec::new(), Vec::new());
         model.step_cell(34, &grid, &nb, &mut out, &mut events);

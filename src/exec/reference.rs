@@ -10,8 +10,8 @@ use super::sync::panic_message;
 use crate::frame::{Event, Frame};
 use crate::grid::Grid;
 use crate::kernel::Input;
-use crate::model::{BodyId, CellModel, Neighbourhood, Step};
-use crate::state::CellStates;
+use crate::model::{BodyId, CellModel, Hint, Neighbourhood, Step};
+use crate::state::{CellStates, Scratch};
 use std::collections::{BTreeMap, BTreeSet};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
@@ -26,14 +26,20 @@ pub struct ReferenceRun<M: CellModel> {
     inputs: BTreeMap<Step, Vec<Input<M::State>>>,
     /// Whether every step is checked against the model contract ([`contract`]).
     check: bool,
-    /// The previous state's entity vector, emptied: the next step's states go into it (no
-    /// new allocation of a state's size each step).
+    /// An emptied entity vector kept from the previous step (the previous state's or the
+    /// one its outputs came in): the next step's states go into it (no new allocation of
+    /// a state's size each step).
     spare: Vec<M::State>,
     /// Per cell (linear index): whether every entity of its state is at rest
     /// ([`CellModel::at_rest`]; an empty cell is). Kept for the current state.
     rest: Vec<bool>,
     /// The canonical hash of the current state.
     hash: u64,
+    /// Working memory of the binning and the hash, kept from step to step.
+    scratch: Scratch,
+    /// The model's hints of the current state's entities ([`CellStates::hints`]) while a
+    /// step is computed, if it computes most of them; else empty. Kept for its capacity.
+    hints: Vec<Hint>,
 }
 
 /// The measured cost of one cell computation (for the scalability model, `crate::scaling`).
@@ -53,7 +59,8 @@ impl<M: CellModel> ReferenceRun<M> {
     pub fn new(model: M, grid: Grid, initial: Vec<M::State>) -> (Self, Vec<Event<M::Event>>) {
         let mut events = Vec::new();
         let state = CellStates::binned::<M>(&grid, initial, 0, &mut events);
-        let hash = state.hash::<M>();
+        let mut scratch = Scratch::default();
+        let hash = state.hash_with::<M>(&mut scratch);
         let mut run = ReferenceRun {
             model,
             grid,
@@ -65,6 +72,8 @@ impl<M: CellModel> ReferenceRun<M> {
             spare: Vec::new(),
             rest: Vec::new(),
             hash,
+            scratch,
+            hints: Vec::new(),
         };
         run.rest = (0..run.state.cell_count())
             .map(|i| run.cell_at_rest(i))
@@ -75,6 +84,24 @@ impl<M: CellModel> ReferenceRun<M> {
     /// Whether every entity of cell `i` of the current state is at rest.
     fn cell_at_rest(&self, i: usize) -> bool {
         self.state.cell_at(i).iter().all(|s| self.model.at_rest(s))
+    }
+
+    /// Recomputes the at-rest flag of the cells `touched` (linear indices), or of every
+    /// cell with `None`, from the current state.
+    fn update_rest(&mut self, touched: Option<&[usize]>) {
+        let mut rest = std::mem::take(&mut self.rest);
+        match touched {
+            Some(touched) => {
+                for &i in touched {
+                    rest[i] = self.cell_at_rest(i);
+                }
+            }
+            None => {
+                rest.clear();
+                rest.extend((0..self.state.cell_count()).map(|i| self.cell_at_rest(i)));
+            }
+        }
+        self.rest = rest;
     }
 
     /// Whether every cell of the 27-neighbourhood of cell `i` is at rest (cells outside the
@@ -91,6 +118,11 @@ impl<M: CellModel> ReferenceRun<M> {
     /// being) a cell that is not at rest. The others step to their own states (the promise
     /// of [`CellModel::at_rest`]).
     fn restless_cells(&self) -> Vec<usize> {
+        // Every occupied cell that is not at rest marks itself: when no occupied cell is at
+        // rest (a gas), they are all computed.
+        if self.state.occupied().all(|i| !self.rest[i]) {
+            return self.state.occupied().collect();
+        }
         let mut marked: Vec<bool> = Vec::new();
         for (i, _) in self.rest.iter().enumerate().filter(|(_, r)| !**r) {
             if marked.is_empty() {
@@ -200,14 +232,21 @@ impl<M: CellModel> ReferenceRun<M> {
             self.restless_cells()
         };
         let mut next = std::mem::take(&mut self.spare);
-        if whole {
-            next.reserve(self.state.len());
+        next.reserve(self.state.len());
+        // Hints once per entity when most entities are in a computed cell (each is read by
+        // every computed neighbourhood that holds it); none when few are (a pile mostly
+        // at rest costs nothing per entity at rest). The outputs are the same either way.
+        let computed: usize = cells.iter().map(|&i| self.state.cell_at(i).len()).sum();
+        if computed * 2 >= self.state.len() {
+            self.state.hints(&self.model, &mut self.hints);
+        } else {
+            self.hints.clear();
         }
         let mut events = Vec::new();
         let mut firsts: Vec<CellResult<M>> = Vec::new();
         for &i in &cells {
             let c = self.grid.coord(i);
-            let nb = self.state.neighbourhood(&self.grid, c);
+            let nb = self.state.neighbourhood_hinted(&self.grid, c, &self.hints);
             let t0 = self.costs.is_some().then(std::time::Instant::now);
             let (start, first_event) = (next.len(), events.len());
             let (model, grid, step) = (&self.model, &self.grid, self.step);
@@ -263,12 +302,14 @@ impl<M: CellModel> ReferenceRun<M> {
             if let Some(inputs) = self.inputs.remove(&step) {
                 next = apply_inputs::<M>(&self.grid, step, next, &inputs)?;
             }
-            self.spare = self
-                .state
-                .rebin::<M>(&self.grid, next, self.step, &mut events);
-            self.rest = (0..self.state.cell_count())
-                .map(|i| self.cell_at_rest(i))
-                .collect();
+            self.spare = self.state.rebin_with::<M>(
+                &self.grid,
+                next,
+                self.step,
+                &mut events,
+                &mut self.scratch,
+            );
+            self.update_rest(None);
             if self.check {
                 contract::check_unique_ids::<M>(&self.grid, &self.state, step)?;
             }
@@ -276,25 +317,33 @@ impl<M: CellModel> ReferenceRun<M> {
             // The computed cells are replaced by what lands in them; every other cell keeps
             // its state, which is its own output (the promise of `at_rest`), unless an output
             // of a computed neighbour lands in it.
-            let mut touched = cells.clone();
-            touched.extend(
-                next.iter()
-                    .filter_map(|s| self.grid.cell_of(M::position(s)))
-                    .map(|c| self.grid.index(c)),
+            // With most cells computed, every cell's flag is recomputed (the same flags,
+            // without sorting the touched cells).
+            let touched = (cells.len() * 4 < self.rest.len()).then(|| {
+                let mut touched = cells.clone();
+                touched.extend(
+                    next.iter()
+                        .filter_map(|s| self.grid.cell_of(M::position(s)))
+                        .map(|c| self.grid.index(c)),
+                );
+                touched.sort_unstable();
+                touched.dedup();
+                touched
+            });
+            self.spare = self.state.replace_cells::<M>(
+                &self.grid,
+                &cells,
+                next,
+                self.step,
+                &mut events,
+                &mut self.scratch,
             );
-            touched.sort_unstable();
-            touched.dedup();
-            self.spare =
-                self.state
-                    .replace_cells::<M>(&self.grid, &cells, next, self.step, &mut events);
-            for i in touched {
-                self.rest[i] = self.cell_at_rest(i);
-            }
+            self.update_rest(touched.as_deref());
         }
         // With no cell computed and no input, the state is the previous one, bit for bit,
         // and so is its hash.
         if !unchanged {
-            self.hash = self.state.hash::<M>();
+            self.hash = self.state.hash_with::<M>(&mut self.scratch);
         }
         events.sort();
         self.step = step;

@@ -77,10 +77,13 @@ impl Grid {
 
     /// The cell holding point `p`, or `None` if `p` is outside the grid (or not finite).
     pub fn cell_of(&self, p: [f32; 3]) -> Option<CellCoord> {
+        // `floor(q)` is finite, at least 0 and below `d` exactly when `q` is at least 0
+        // and below `d` (an integer, exact as an `f32`: `d` < 2^24), and then it is
+        // `q`'s truncation: no call to `floor` (a library call on the baseline x86-64).
         let c = |v: f32, m: f32, d: i32| -> Option<i32> {
-            let f = ((v - m) / self.edge).floor();
-            if f.is_finite() && f >= 0.0 && f < d as f32 {
-                Some(f as i32)
+            let q = (v - m) / self.edge;
+            if q >= 0.0 && q < d as f32 {
+                Some(q as i32)
             } else {
                 None
             }
@@ -127,6 +130,49 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cell_of_is_the_floor_of_the_scaled_offset_inside_the_grid() {
+        let g = Grid::covering(Vec3::new(-1.0, 0.0, -2.0), Vec3::new(3.0, 2.0, 2.0), 0.5);
+        let by_floor = |p: [f32; 3]| -> Option<CellCoord> {
+            let c = |v: f32, m: f32, d: i32| {
+                let f = ((v - m) / g.edge).floor();
+                (f.is_finite() && f >= 0.0 && f < d as f32).then_some(f as i32)
+            };
+            Some(CellCoord::new(
+                c(p[0], g.min.x, g.dims[0])?,
+                c(p[1], g.min.y, g.dims[1])?,
+                c(p[2], g.min.z, g.dims[2])?,
+            ))
+        };
+        let mut values = vec![
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MAX,
+            f32::MIN,
+            -0.0,
+            0.0,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+        ];
+        for k in -100..=100 {
+            let v = k as f32 * 0.05;
+            values.extend([v, v.next_up(), v.next_down()]);
+        }
+        for &x in &values {
+            for &y in &[0.3f32, -0.0, 1.999_999_9, 2.0] {
+                for &z in &[-2.0f32, -2.000_000_2, 1.999_999_9, 0.25] {
+                    let p = [x, y, z];
+                    assert_eq!(g.cell_of(p), by_floor(p), "{p:?}");
+                    let q = [y, x, z];
+                    assert_eq!(g.cell_of(q), by_floor(q), "{q:?}");
+                    let r = [z, y, x];
+                    assert_eq!(g.cell_of(r), by_floor(r), "{r:?}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn index_and_coord_are_inverse() {

@@ -14,7 +14,7 @@ use crate::frame::Event;
 use crate::grid::Grid;
 use crate::hash::StateHash;
 use crate::math::Vec3;
-use crate::model::{BodyId, CellModel, Neighbourhood, Step};
+use crate::model::{BodyId, CellModel, Hint, Neighbourhood, Step};
 use std::cell::OnceCell;
 
 /// Cosine of the largest angle between a contact normal and the vertical for which the
@@ -643,7 +643,8 @@ impl CellModel for RigidBodyModel {
     ) {
         // Sleeping (SPEC.md §5.4): a sleeping body that no awake body can reach keeps its
         // pose and has zero velocity; if the whole neighbourhood sleeps, nothing else is done.
-        if nb.iter().all(|b| self.is_asleep(b)) {
+        // (The centre cell's bodies first: in a gas the first of them is awake.)
+        if nb.own().iter().all(|b| self.is_asleep(b)) && nb.iter().all(|b| self.is_asleep(b)) {
             out.extend(nb.own().iter().map(frozen));
             return;
         }
@@ -684,17 +685,49 @@ impl CellModel for RigidBodyModel {
                 // Sized for the whole neighbourhood up front: a filtered collect grows by
                 // reallocation (4, 8, 16, ... candidates), a measurable share of a step.
                 candidates.reserve_exact(nb.cells.iter().map(|c| c.len()).sum());
-                for (slot, cell) in nb.cells.iter().enumerate() {
-                    let offset = Neighbourhood::<Body>::offset(slot);
-                    candidates.extend(
-                        cell.iter()
-                            .map(|b| Candidate::new(b, offset, self.dt, self.prediction()))
-                            .filter(|c| {
-                                let p = c.body.position;
-                                let r = c.sweep + c.motion;
-                                (0..3).all(|k| p[k] >= lo[k] - grow - r && p[k] <= hi[k] + grow + r)
-                            }),
-                    );
+                // All six comparisons, then one branch: which of them fails first is
+                // unpredictable in a gas (the same comparisons of the same numbers).
+                let within = |p: [f32; 3], r: f32| {
+                    (0..3).fold(true, |ok, k| {
+                        ok & (p[k] >= lo[k] - grow - r) & (p[k] <= hi[k] + grow + r)
+                    })
+                };
+                for row in 0..9 {
+                    let slots = &nb.cells[3 * row..3 * row + 3];
+                    if let Some(hints) = nb.row_hints(row) {
+                        // The same test on the same numbers, read from the hints: a body
+                        // left out is not loaded at all. Same order: slot by slot.
+                        let (l0, l1) = (slots[0].len(), slots[0].len() + slots[1].len());
+                        for (i, h) in hints.iter().enumerate() {
+                            if within([h[0], h[1], h[2]], h[3]) {
+                                let (k, b) = if i < l0 {
+                                    (0, &slots[0][i])
+                                } else if i < l1 {
+                                    (1, &slots[1][i - l0])
+                                } else {
+                                    (2, &slots[2][i - l1])
+                                };
+                                let offset = Neighbourhood::<Body>::offset(3 * row + k);
+                                let c = Candidate::new(b, offset, self.dt, self.prediction());
+                                candidates.push(c);
+                            }
+                        }
+                        continue;
+                    }
+                    for (k, cell) in slots.iter().enumerate() {
+                        if cell.is_empty() {
+                            continue;
+                        }
+                        let offset = Neighbourhood::<Body>::offset(3 * row + k);
+                        candidates.extend(
+                            cell.iter()
+                                .map(|b| Candidate::new(b, offset, self.dt, self.prediction()))
+                                .filter(|c| {
+                                    let r = c.sweep + c.motion;
+                                    within(c.body.position.into(), r)
+                                }),
+                        );
+                    }
                 }
             }
             let me = Candidate::new(own, [0; 3], self.dt, self.prediction());
@@ -825,6 +858,16 @@ impl CellModel for RigidBodyModel {
             && a.friction.to_bits() == b.friction.to_bits()
             && a.restitution.to_bits() == b.restitution.to_bits()
             && a.shape == b.shape
+    }
+
+    /// The body's position and the reach of the candidate filter of
+    /// [`step_cell`](CellModel::step_cell), `sweep + motion` of its broad-phase
+    /// [`Candidate`]: computed once per body and step instead of once per neighbourhood
+    /// that holds it.
+    fn hint(&self, b: &Body) -> Option<Hint> {
+        let c = Candidate::new(b, [0; 3], self.dt, self.prediction());
+        let p = b.position;
+        Some([p.x, p.y, p.z, c.sweep + c.motion])
     }
 
     fn event_name(kind: &EventKind) -> String {

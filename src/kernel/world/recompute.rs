@@ -62,7 +62,7 @@ impl<M: CellModel> World<M> {
             Nb::Own(n) => slot.state(n),
             Nb::Margin(m) => slot.ghost(m),
         });
-        let nb = Neighbourhood { centre: c, cells };
+        let nb = Neighbourhood::new(c, cells);
         let mut events = Vec::new();
         self.scratch.clear();
         self.model
