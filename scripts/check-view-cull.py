@@ -18,7 +18,6 @@ import argparse
 import base64
 import importlib.util
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -82,7 +81,7 @@ def main():
     view_args = a.view_args or ["--objects", "8000", "--threads", "2", "--worlds", "8"]
     viewer = subprocess.Popen([a.soda, "view", "--port", "0", *view_args],
                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    driver = static = None
+    static = None
     worst = 0
     try:
         first = viewer.stdout.readline()
@@ -96,72 +95,39 @@ def main():
             time.sleep(0.5)
             url = f"http://127.0.0.1:{pport}/?ws={ws}"
         url += ("&" if "?" in url else "?") + f"scale={a.scale}"
-        port = measure.free_port()
-        driver = subprocess.Popen(["chromedriver", f"--port={port}"],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        base = f"http://127.0.0.1:{port}"
-        deadline = time.time() + 20
-        while True:
-            try:
-                measure.request("GET", base + "/status")
-                break
-            except OSError:
+        with measure.browser_session(a.window_size) as b:
+            js = b.js
+            measure.request("POST", b.s + "/url", {"url": url})
+            deadline = time.time() + 60
+            while not js("return !!(window.soda && window.soda.frames > 10 && window.soda.shown)"):
                 if time.time() > deadline:
-                    raise
+                    raise RuntimeError("no frames on the page within 60 s")
+                time.sleep(0.2)
+            time.sleep(a.warmup)
+            js("window.soda.pause(); return true")
+            while not js("return window.soda.shown.paused"):
                 time.sleep(0.1)
-        caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
-            "binary": "/usr/bin/chromium",
-            "args": measure.CHROME_ARGS + [f"--window-size={a.window_size}"]}}}}
-        session = measure.request("POST", base + "/session", caps)["value"]["sessionId"]
-        s = f"{base}/session/{session}"
-        js = lambda script, *args: measure.request(
-            "POST", s + "/execute/sync", {"script": script, "args": list(args)})["value"]
-        w, h = (int(x) for x in a.window_size.split(","))
-        measure.request("POST", s + "/goog/cdp/execute", {"cmd": "Emulation.setDeviceMetricsOverride", "params": {
-            "width": w, "height": h, "deviceScaleFactor": 1, "mobile": False}})
-        measure.request("POST", s + "/url", {"url": url})
-        deadline = time.time() + 60
-        while not js("return !!(window.soda && window.soda.frames > 10 && window.soda.shown)"):
-            if time.time() > deadline:
-                raise RuntimeError("no frames on the page within 60 s")
-            time.sleep(0.2)
-        time.sleep(a.warmup)
-        js("window.soda.pause(); return true")
-        while not js("return window.soda.shown.paused"):
-            time.sleep(0.1)
-        time.sleep(0.5)
-        step = js("return window.soda.shown.step")
-        print(f"# soda view {' '.join(view_args)}; step {step}; {a.window_size} at render scale {a.scale};"
-              f" {a.flag} on against off")
-        home = js("const c = window.soda.camera; return c.position.toArray()")
-        for name, view in VIEWS:
-            js("window.soda.camera.position.fromArray(arguments[0]); window.soda.controls.update(); return true", home)
-            if view:
-                js(SET_VIEW, list(view))
-            r = js(COMPARE, True, a.flag)
-            worst = max(worst, r["differing"])
-            print(f"{name:7} in sight {r['in_sight']:5} of {r['bodies']:5}, triangles {r['triangles'][0]:6} of {r['triangles'][1]:6}; differing pixels {r['differing']} of {r['pixels']}"
-                  + (f" (x, y, culled, all: {r['where']})" if r["where"] else ""))
-            if a.screenshot:
-                for on, tag in ((False, "all" if a.flag == "cull" else "fine"), (True, a.flag)):
-                    js("window.soda[arguments[1]] = arguments[0]; window.soda.renderNow(); return true", on, a.flag)
-                    png = measure.request("GET", s + "/screenshot")["value"]
-                    with open(f"{a.screenshot}-{name}-{tag}.png", "wb") as f:
-                        f.write(base64.b64decode(png))
-        measure.request("DELETE", s)
+            time.sleep(0.5)
+            step = js("return window.soda.shown.step")
+            print(f"# soda view {' '.join(view_args)}; step {step}; {a.window_size} at render scale {a.scale};"
+                  f" {a.flag} on against off")
+            home = js("const c = window.soda.camera; return c.position.toArray()")
+            for name, view in VIEWS:
+                js("window.soda.camera.position.fromArray(arguments[0]); window.soda.controls.update(); return true", home)
+                if view:
+                    js(SET_VIEW, list(view))
+                r = js(COMPARE, True, a.flag)
+                worst = max(worst, r["differing"])
+                print(f"{name:7} in sight {r['in_sight']:5} of {r['bodies']:5}, triangles {r['triangles'][0]:6} of {r['triangles'][1]:6}; differing pixels {r['differing']} of {r['pixels']}"
+                      + (f" (x, y, culled, all: {r['where']})" if r["where"] else ""))
+                if a.screenshot:
+                    for on, tag in ((False, "all" if a.flag == "cull" else "fine"), (True, a.flag)):
+                        js("window.soda[arguments[1]] = arguments[0]; window.soda.renderNow(); return true", on, a.flag)
+                        png = measure.request("GET", b.s + "/screenshot")["value"]
+                        with open(f"{a.screenshot}-{name}-{tag}.png", "wb") as f:
+                            f.write(base64.b64decode(png))
     finally:
-        if static:
-            static.kill()
-            static.wait()
-        if driver:
-            driver.kill()
-            driver.wait()
-        viewer.send_signal(signal.SIGINT)
-        try:
-            viewer.wait(10)
-        except subprocess.TimeoutExpired:
-            viewer.kill()
-            viewer.wait()
+        measure.stop(static, viewer)
     sys.exit(1 if worst > 0 else 0)
 
 

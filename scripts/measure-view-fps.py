@@ -27,6 +27,8 @@ simulation share its cores, and other work moves the numbers by a factor of two.
 
 import argparse
 import base64
+import collections
+import contextlib
 import json
 import os
 import signal
@@ -131,10 +133,69 @@ def cpu_seconds(pids):
     return by
 
 
+Browser = collections.namedtuple("Browser", "base s js cdp driver")
+
+
+@contextlib.contextmanager
+def browser_session(size):
+    """Headless Chromium through a ChromeDriver of its own, at window SIZE ("W,H").
+
+    Yields a Browser: base (ChromeDriver's address), s (the session's address),
+    js(script, *args) (runs script in the page, returns its value), cdp(cmd, params)
+    (a DevTools command) and driver (the ChromeDriver process, for the CPU times of it
+    and its browser). The session is deleted when the block ends normally; ChromeDriver
+    is stopped either way."""
+    port = free_port()
+    driver = subprocess.Popen(["chromedriver", f"--port={port}"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        base = f"http://127.0.0.1:{port}"
+        deadline = time.time() + 20
+        while True:
+            try:
+                request("GET", base + "/status")
+                break
+            except OSError:
+                if time.time() > deadline:
+                    raise
+                time.sleep(0.1)
+        caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
+            "binary": "/usr/bin/chromium",
+            "args": CHROME_ARGS + [f"--window-size={size}"]}}}}
+        session = request("POST", base + "/session", caps)["value"]["sessionId"]
+        s = f"{base}/session/{session}"
+        js = lambda script, *args: request(
+            "POST", s + "/execute/sync", {"script": script, "args": list(args)})["value"]
+        cdp = lambda cmd, params: request("POST", s + "/goog/cdp/execute", {"cmd": cmd, "params": params})["value"]
+        # The viewport exactly SIZE, one device pixel per CSS pixel.
+        w, h = (int(x) for x in size.split(","))
+        cdp("Emulation.setDeviceMetricsOverride",
+            {"width": w, "height": h, "deviceScaleFactor": 1, "mobile": False})
+        yield Browser(base, s, js, cdp, driver)
+        request("DELETE", s)
+    finally:
+        driver.kill()
+        driver.wait()
+
+
+def stop(static, viewer):
+    """Stops the static file server (if any) and soda view (if any: SIGINT, then kill after 10 s)."""
+    if static:
+        static.kill()
+        static.wait()
+    if viewer:
+        viewer.send_signal(signal.SIGINT)
+        try:
+            viewer.wait(10)
+        except subprocess.TimeoutExpired:
+            viewer.kill()
+            viewer.wait()
+
+
 def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query=""):
     viewer = subprocess.Popen([soda, "view", "--port", "0", *view_args],
                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    driver = static = None
+    static = None
     try:
         first = viewer.stdout.readline()
         if "http://" not in first:
@@ -151,65 +212,32 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
             url = f"http://127.0.0.1:{pport}/?ws={ws}"
         if query:
             url += ("&" if "?" in url else "?") + query
-        port = free_port()
-        driver = subprocess.Popen(["chromedriver", f"--port={port}"],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        base = f"http://127.0.0.1:{port}"
-        deadline = time.time() + 20
-        while True:
-            try:
-                request("GET", base + "/status")
-                break
-            except OSError:
+        with browser_session(size) as b:
+            js, cdp = b.js, b.cdp
+            request("POST", b.s + "/url", {"url": url})
+            deadline = time.time() + 60
+            while not js("return !!(window.soda && window.soda.frames > 10)"):
                 if time.time() > deadline:
-                    raise
-                time.sleep(0.1)
-        caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
-            "binary": "/usr/bin/chromium",
-            "args": CHROME_ARGS + [f"--window-size={size}"]}}}}
-        session = request("POST", base + "/session", caps)["value"]["sessionId"]
-        s = f"{base}/session/{session}"
-        js = lambda script: request("POST", s + "/execute/sync", {"script": script, "args": []})["value"]
-        cdp = lambda cmd, params: request("POST", s + "/goog/cdp/execute", {"cmd": cmd, "params": params})["value"]
-        w, h = (int(x) for x in size.split(","))
-        cdp("Emulation.setDeviceMetricsOverride",
-            {"width": w, "height": h, "deviceScaleFactor": 1, "mobile": False})
-        request("POST", s + "/url", {"url": url})
-        deadline = time.time() + 60
-        while not js("return !!(window.soda && window.soda.frames > 10)"):
-            if time.time() > deadline:
-                raise RuntimeError("no frames on the page within 60 s")
-            time.sleep(0.2)
-        time.sleep(warmup)
-        cdp("Performance.enable", {})
-        m0 = {m["name"]: m["value"] for m in cdp("Performance.getMetrics", {})["metrics"]}
-        pids = [viewer.pid] + descendants(driver.pid)
-        c0 = cpu_seconds(pids)
-        load0 = os.getloadavg()[0]
-        js(COUNTERS)
-        time.sleep(seconds)
-        r = js(READ)
-        load1 = os.getloadavg()[0]
-        c1 = cpu_seconds(pids)
-        m1 = {m["name"]: m["value"] for m in cdp("Performance.getMetrics", {})["metrics"]}
-        if screenshot:
-            png = request("GET", s + "/screenshot")["value"]
-            with open(screenshot, "wb") as f:
-                f.write(base64.b64decode(png))
-        request("DELETE", s)
+                    raise RuntimeError("no frames on the page within 60 s")
+                time.sleep(0.2)
+            time.sleep(warmup)
+            cdp("Performance.enable", {})
+            m0 = {m["name"]: m["value"] for m in cdp("Performance.getMetrics", {})["metrics"]}
+            pids = [viewer.pid] + descendants(b.driver.pid)
+            c0 = cpu_seconds(pids)
+            load0 = os.getloadavg()[0]
+            js(COUNTERS)
+            time.sleep(seconds)
+            r = js(READ)
+            load1 = os.getloadavg()[0]
+            c1 = cpu_seconds(pids)
+            m1 = {m["name"]: m["value"] for m in cdp("Performance.getMetrics", {})["metrics"]}
+            if screenshot:
+                png = request("GET", b.s + "/screenshot")["value"]
+                with open(screenshot, "wb") as f:
+                    f.write(base64.b64decode(png))
     finally:
-        if static:
-            static.kill()
-            static.wait()
-        if driver:
-            driver.kill()
-            driver.wait()
-        viewer.send_signal(signal.SIGINT)
-        try:
-            viewer.wait(10)
-        except subprocess.TimeoutExpired:
-            viewer.kill()
-            viewer.wait()
+        stop(static, viewer)
     wall = r["seconds"]
     cpu = {k: round((c1.get(k, 0) - c0.get(k, 0)) / wall, 2) for k in c1}
     return {
@@ -241,41 +269,19 @@ def floor(query, seconds, warmup, size):
     with tempfile.TemporaryDirectory() as d:
         shutil.copy(os.path.join(here, "view-floor.html"), os.path.join(d, "index.html"))
         os.symlink(os.path.join(here, "..", "web", "vendor"), os.path.join(d, "vendor"))
-        pport, port = free_port(), free_port()
+        pport = free_port()
         static = subprocess.Popen([sys.executable, "-m", "http.server", "--bind", "127.0.0.1",
                                    str(pport), "--directory", d],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        driver = subprocess.Popen(["chromedriver", f"--port={port}"],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
-            base = f"http://127.0.0.1:{port}"
-            deadline = time.time() + 20
-            while True:
-                try:
-                    request("GET", base + "/status")
-                    break
-                except OSError:
-                    if time.time() > deadline:
-                        raise
-                    time.sleep(0.1)
-            caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
-                "binary": "/usr/bin/chromium", "args": CHROME_ARGS + [f"--window-size={size}"]}}}}
-            s = base + "/session/" + request("POST", base + "/session", caps)["value"]["sessionId"]
-            js = lambda script: request("POST", s + "/execute/sync", {"script": script, "args": []})["value"]
-            w, h = (int(x) for x in size.split(","))
-            request("POST", s + "/goog/cdp/execute", {"cmd": "Emulation.setDeviceMetricsOverride", "params": {
-                "width": w, "height": h, "deviceScaleFactor": 1, "mobile": False}})
-            request("POST", s + "/url", {"url": f"http://127.0.0.1:{pport}/index.html?{query}"})
-            time.sleep(warmup)
-            js(COUNTERS)
-            time.sleep(seconds)
-            r = js(READ)
-            request("DELETE", s)
+            with browser_session(size) as b:
+                request("POST", b.s + "/url", {"url": f"http://127.0.0.1:{pport}/index.html?{query}"})
+                time.sleep(warmup)
+                b.js(COUNTERS)
+                time.sleep(seconds)
+                r = b.js(READ)
         finally:
-            driver.kill()
-            driver.wait()
-            static.kill()
-            static.wait()
+            stop(static, None)
     return {"page_fps": round(r["raf"] / r["seconds"], 1), "update_ms": round(r["draw_ms"], 2),
             "render_ms": round(r["render_ms"], 2)}
 
