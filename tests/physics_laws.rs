@@ -116,6 +116,36 @@ fn spec(
 }
 
 /// Runs `scene` for `steps` steps; returns the states after every step (step 0 first).
+/// One ball of radius `r` resting on the ground at `(x, z)` in a domain `±half` wide, ball
+/// and ground of friction `friction`, restitution 0.
+fn ball_on_the_ground(
+    half: f32,
+    r: f32,
+    density: f32,
+    friction: f32,
+    at: [f32; 2],
+    velocity: [f32; 3],
+    angular_velocity: [f32; 3],
+) -> Scene {
+    SceneBuilder::new([-half, -1.0, -half], [half, 5.0, half])
+        .environment_material(friction, 0.0)
+        .body_spec(BodySpec {
+            id: 0,
+            shape: Shape::Ball { radius: r },
+            material: Material {
+                density,
+                friction,
+                restitution: 0.0,
+            },
+            position: [at[0], r, at[1]],
+            rotation: [0.3, -1.1, 2.0],
+            velocity,
+            angular_velocity,
+        })
+        .build()
+        .unwrap()
+}
+
 fn history(scene: Scene, steps: u32) -> Vec<Vec<Body>> {
     let mut sim = Simulation::new(scene);
     let mut out = vec![bodies(&sim)];
@@ -296,19 +326,10 @@ proptest! {
         friction in 0.0f32..1.0,
         slip in 0.0f32..1.0,
     ) {
-        let builder = SceneBuilder::new([-60.0, -1.0, -60.0], [60.0, 5.0, 60.0])
-            .environment_material(friction, 0.0)
-            .body_spec(BodySpec {
-                id: 0,
-                shape: Shape::Ball { radius: r },
-                material: Material { density, friction, restitution: 0.0 },
-                position: [-50.0, r, 0.0],
-                rotation: [0.3, -1.1, 2.0],
-                velocity: [v, 0.0, 0.0],
-                // Rolling (slip 0) to sliding on a still ball (slip 1).
-                angular_velocity: [0.0, 0.0, -(1.0 - slip) * v / r],
-            });
-        let h = history(builder.build().unwrap(), 600);
+        // Rolling (slip 0) to sliding on a still ball (slip 1).
+        let spin = [0.0, 0.0, -(1.0 - slip) * v / r];
+        let scene = ball_on_the_ground(60.0, r, density, friction, [-50.0, 0.0], [v, 0.0, 0.0], spin);
+        let h = history(scene, 600);
         let v0 = h[0][0].linvel.norm();
         for (step, pair) in h.windows(2).enumerate() {
             let speed = pair[1][0].linvel.norm();
@@ -336,18 +357,7 @@ proptest! {
         sign in prop::bool::ANY,
     ) {
         let spin = if sign { spin } else { -spin };
-        let builder = SceneBuilder::new([-10.0, -1.0, -10.0], [10.0, 5.0, 10.0])
-            .environment_material(friction, 0.0)
-            .body_spec(BodySpec {
-                id: 0,
-                shape: Shape::Ball { radius: r },
-                material: Material { density, friction, restitution: 0.0 },
-                position: [0.0, r, 0.0],
-                rotation: [0.3, -1.1, 2.0],
-                velocity: [0.0; 3],
-                angular_velocity: [0.0, spin, 0.0],
-            });
-        let scene = builder.build().unwrap();
+        let scene = ball_on_the_ground(10.0, r, density, friction, [0.0, 0.0], [0.0; 3], [0.0, spin, 0.0]);
         let rho = scene.solver.patch_radius;
         let h = history(scene, 60);
         let rate = friction * 9.81 * rho / (0.4 * r * r);
