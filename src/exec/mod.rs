@@ -130,6 +130,54 @@ pub(crate) fn whole_frame<'a, M: CellModel>(
     (frame, sorted)
 }
 
+/// The step, hash and body count of the last committed frame an executor finished.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LastFrame {
+    /// Its step.
+    pub step: Step,
+    /// Its canonical hash.
+    pub hash: u64,
+    /// Its body count.
+    pub bodies: usize,
+}
+
+/// The committed frame of step `t`, as [`whole_frame`] gives it, and its sorted states if
+/// `wanted` asks for them. When `unchanged` (every world's cells hold at `t` the
+/// allocations they held at `t − 1`: SPEC.md §K3, an unchanged cell shares its allocation)
+/// and `last` is the frame of `t − 1`, the hash and body count are `last`'s, known without
+/// sorting or hashing a state: a resting scene's frames cost O(1) each, as the reference's
+/// do. `last` becomes step `t`'s.
+pub(crate) fn next_frame<'a, M: CellModel>(
+    t: Step,
+    states: impl IntoIterator<Item = &'a M::State>,
+    mut events: Vec<Event<M::Event>>,
+    unchanged: bool,
+    last: &mut Option<LastFrame>,
+    wanted: &crate::frame::StatesWanted,
+) -> (Frame<M::Event>, Option<Vec<&'a M::State>>) {
+    if let Some(prev) = last.filter(|l| unchanged && l.step + 1 == t) {
+        if !wanted.wants(t, prev.hash) {
+            events.sort();
+            *last = Some(LastFrame { step: t, ..prev });
+            let frame = Frame {
+                step: t,
+                hash: prev.hash,
+                bodies: prev.bodies,
+                events,
+            };
+            return (frame, None);
+        }
+    }
+    let (frame, sorted) = whole_frame::<M>(t, states, events);
+    *last = Some(LastFrame {
+        step: t,
+        hash: frame.hash,
+        bodies: frame.bodies,
+    });
+    let sorted = wanted.wants(t, frame.hash).then_some(sorted);
+    (frame, sorted)
+}
+
 /// The worlds of a Time Warp run, as both kernel executors start them.
 pub(crate) struct Worlds<M: CellModel> {
     /// The grid, shared with every world.

@@ -5,6 +5,7 @@
 use super::report::ThreadTimes;
 use super::shared::{RunStatus, SharedRun, ThreadedWorld};
 use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
+use crate::exec::LastFrame;
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::kernel::trace::GvtSample;
 use crate::model::{CellModel, Step};
@@ -27,6 +28,9 @@ pub(super) struct Partial<M: CellModel> {
     pub(super) states: Vec<Arc<[M::State]>>,
     /// The events of their cells' computations of the step before.
     pub(super) events: Vec<Event<M::Event>>,
+    /// Whether every contributing world's cells hold the allocations of the step before
+    /// ([`crate::kernel::World::unchanged_since_previous`]).
+    pub(super) unchanged: bool,
 }
 
 /// Committed steps waiting for the output stage (the calling thread), whole (every world
@@ -75,8 +79,10 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
                 worlds: 0,
                 states: Vec::new(),
                 events: Vec::new(),
+                unchanged: true,
             });
             part.worlds += 1;
+            part.unchanged &= held.world.unchanged_since_previous(t);
             part.states.extend(held.world.shared_states_at(t));
             part.events.extend(held.world.events_at(t - 1).cloned());
         }
@@ -115,16 +121,22 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
 }
 
 /// Finishes committed step `t` from every world's contribution
-/// ([`crate::exec::whole_frame`]) and, if `wanted` asks for them, clones its sorted states.
+/// ([`crate::exec::next_frame`]: a step no world's cells changed at keeps the hash of
+/// `last`, the step before) and, if `wanted` asks for them, clones its sorted states.
 pub(super) fn finish_frame<M: CellModel>(
     t: Step,
     p: Partial<M>,
     wanted: &StatesWanted,
+    last: &mut Option<LastFrame>,
 ) -> (Frame<M::Event>, Option<Vec<M::State>>) {
-    let (frame, sorted) =
-        crate::exec::whole_frame::<M>(t, p.states.iter().flat_map(|c| c.iter()), p.events);
-    let states = wanted
-        .wants(t, frame.hash)
-        .then(|| sorted.into_iter().cloned().collect());
+    let (frame, sorted) = crate::exec::next_frame::<M>(
+        t,
+        p.states.iter().flat_map(|c| c.iter()),
+        p.events,
+        p.unchanged,
+        last,
+        wanted,
+    );
+    let states = sorted.map(|s| s.into_iter().cloned().collect());
     (frame, states)
 }

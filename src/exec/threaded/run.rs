@@ -139,10 +139,12 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     let mut frames = Vec::new();
     let mut delivered = 0u64;
     let mut stopped = false;
+    // The last frame finished: a step no cell changed at keeps its hash.
+    let mut last_frame = None;
     let poster = shared.clone();
     let mut deliver = |batch: VecDeque<(Step, Partial<M>)>| {
         for (t, partial) in batch {
-            let (frame, states) = finish_frame::<M>(t, partial, wanted);
+            let (frame, states) = finish_frame::<M>(t, partial, wanted, &mut last_frame);
             if delivered < steps && !stopped {
                 delivered += 1;
                 let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());

@@ -51,6 +51,7 @@ use super::error::{ExecError, InputError};
 use super::live::{LiveStatus, WorldStatus};
 use super::load::LoadMeter;
 use super::sync::panic_message;
+use super::LastFrame;
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::grid::Grid;
 use crate::kernel::balance::{imbalance, Balancer, RoundRecord};
@@ -92,6 +93,8 @@ pub struct VirtualRun<M: CellModel> {
     turn: u64,
     gvt: Step,
     committed: Step,
+    /// The last committed frame (a step no cell changed at keeps its hash).
+    last_frame: Option<LastFrame>,
     limit: Step,
     end: Step,
     gvt_advances: u64,
@@ -158,6 +161,7 @@ impl<M: CellModel> VirtualRun<M> {
             turn: 0,
             gvt: 1,
             committed: 0,
+            last_frame: None,
             limit: 0,
             end: 0,
             gvt_advances: 0,
@@ -574,7 +578,8 @@ impl<M: CellModel> VirtualRun<M> {
         let grid = self.grid.clone();
         while self.committed + 1 < new && self.committed < self.limit && !self.stopped {
             let t = self.committed + 1;
-            let (frame, all) = self.frame(t);
+            let mut last = self.last_frame;
+            let (frame, all) = self.frame(t, wanted, &mut last);
             let mut pending = Vec::new();
             let mut post = |step: Step, input: Input<M::State>| {
                 super::check_input::<M>(&grid, floor, step, &input)?;
@@ -588,10 +593,10 @@ impl<M: CellModel> VirtualRun<M> {
                 worlds: worlds.iter().map(WorldStatus::of).collect(),
             };
             let mut control = RunControl::new(floor, &mut post).with_probe(&mut probe);
-            let states = wanted.wants(t, frame.hash).then_some(&all[..]);
-            sink(frame, states, &mut control);
+            sink(frame, all.as_deref(), &mut control);
             let stop = control.stopped();
             drop(all);
+            self.last_frame = last;
             for w in &mut self.worlds {
                 w.note_committed(t);
             }
@@ -607,14 +612,29 @@ impl<M: CellModel> VirtualRun<M> {
         }
     }
 
-    fn frame(&self, t: Step) -> (Frame<M::Event>, Vec<&M::State>) {
+    /// The committed frame of step `t` ([`super::next_frame`]: a step no world's cells
+    /// changed at keeps the previous frame's hash) and its sorted states if `wanted`.
+    fn frame(
+        &self,
+        t: Step,
+        wanted: &StatesWanted,
+        last: &mut Option<LastFrame>,
+    ) -> (Frame<M::Event>, Option<Vec<&M::State>>) {
         let events: Vec<Event<M::Event>> = self
             .worlds
             .iter()
             .flat_map(|w| w.events_at(t - 1))
             .cloned()
             .collect();
-        super::whole_frame::<M>(t, self.worlds.iter().flat_map(|w| w.state_at(t)), events)
+        let unchanged = self.worlds.iter().all(|w| w.unchanged_since_previous(t));
+        super::next_frame::<M>(
+            t,
+            self.worlds.iter().flat_map(|w| w.state_at(t)),
+            events,
+            unchanged,
+            last,
+            wanted,
+        )
     }
 }
 

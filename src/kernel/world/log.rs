@@ -417,6 +417,26 @@ impl<M: CellModel> World<M> {
         self.slot(t).map(|s| s.state(self.own(cell)))
     }
 
+    /// Whether its own cells' states at step `t` are those at `t − 1`, allocation for
+    /// allocation (an unchanged cell shares its allocation, SPEC.md §K3), so that its part of
+    /// the committed state did not change. `false` when either step is not held.
+    pub fn unchanged_since_previous(&self, t: Step) -> bool {
+        let (Some(prev), Some(cur)) = (t.checked_sub(1).and_then(|p| self.slot(p)), self.slot(t))
+        else {
+            return false;
+        };
+        prev.states.len() == cur.states.len()
+            && prev
+                .states
+                .iter()
+                .zip(cur.states.iter())
+                .all(|(a, b)| match (a, b) {
+                    (None, None) => true,
+                    (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+                    _ => false,
+                })
+    }
+
     /// Its slot of step `t`, if held.
     pub(super) fn slot(&self, t: Step) -> Option<&Slot<M::State, M::Event>> {
         t.checked_sub(self.base)
