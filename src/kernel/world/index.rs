@@ -20,7 +20,7 @@ impl OwnCell {
     }
 
     /// Its position in a [`PerOwnCell`] vector.
-    fn index(self) -> usize {
+    pub(super) fn index(self) -> usize {
         self.0 as usize
     }
 

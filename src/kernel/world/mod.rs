@@ -23,6 +23,7 @@ mod conservative;
 mod index;
 mod keys;
 mod log;
+mod prepared;
 mod receive;
 mod recompute;
 mod send;
@@ -124,6 +125,8 @@ pub struct World<M: CellModel> {
     scratch: Vec<M::State>,
     /// Scratch for `compute`: the home cell of each body it produced.
     homes_scratch: Vec<u32>,
+    /// The hints and cells at rest of the step being advanced (`advance`, `compute`).
+    prepared: prepared::Prepared,
     /// Its part of the run trace, when recording.
     record: Option<WorldTrace>,
     /// The step the world started from (0, or its last reterritory): ghosts of this step

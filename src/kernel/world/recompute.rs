@@ -62,7 +62,7 @@ impl<M: CellModel> World<M> {
             Nb::Own(n) => slot.state(n),
             Nb::Margin(m) => slot.ghost(m),
         });
-        let nb = Neighbourhood::new(c, cells);
+        let nb = self.prepared.attach(Neighbourhood::new(c, cells), nbrs, s);
         let mut events = Vec::new();
         self.scratch.clear();
         self.model
@@ -366,9 +366,26 @@ impl<M: CellModel> World<M> {
         // How many own cells' outputs land in each own cell (each output counted once).
         let mut landings: PerOwnCell<u32> = vec![0; n].into();
         let mut migs: BTreeSet<(OwnCell, WorldId)> = BTreeSet::new();
+        // Every cell of step h reads the states of h: their hints and whether they are at
+        // rest are worked out once.
+        self.prepared.prepare(
+            &*self.model,
+            &self.slots[i],
+            self.cells.as_slice(),
+            &self.margin,
+            self.nbrs.as_slice(),
+            h,
+        );
         for x in OwnCell::all(n) {
             let o = if self.slots[i].state(x).is_empty() {
                 Out::empty(self.cells[x])
+            } else if self.prepared.keeps(x, h) {
+                // The model's promise (`CellModel::at_rest`, SPEC.md §4.1 rule 7): the
+                // output is the cell's state, bit for bit, and no event. Counted as a
+                // computation, which it stands for.
+                self.counters.cells_computed += 1;
+                let state = self.slots[i].states[x].clone();
+                Out::new(self.cells[x], state, Vec::new(), Vec::new(), true)
             } else {
                 self.compute(x, h)
             };
@@ -390,6 +407,8 @@ impl<M: CellModel> World<M> {
             }
             self.slots[i].outs[x] = Some(o);
         }
+        // A straggler may change the states of h: a re-execution computes them afresh.
+        self.prepared.clear();
         // The state at h + 1 of a cell whose own output alone lands in it is that output (one
         // shared allocation, no copy). The other cells that something lands in, those that
         // also receive early migrations, and every cell when inputs apply at h + 1, take the
