@@ -76,9 +76,24 @@ impl Schedule {
         Some(self.tokens)
     }
 
-    /// Takes the best ready world, if any.
-    pub(crate) fn take_ready(&mut self) -> Option<usize> {
-        let w = self.ready.pop_first()?.2;
+    /// Takes a ready world: among those at the lowest published bound (the laggards, all
+    /// equally behind), the best one for which `prefer` holds (the threaded executor
+    /// prefers a world the taking thread ran last: its states are in that core's cache),
+    /// else the best ready world.
+    pub(crate) fn take_ready_preferring(
+        &mut self,
+        prefer: impl Fn(usize) -> bool,
+    ) -> Option<usize> {
+        let lowest = self.ready.first()?.0;
+        let key = self
+            .ready
+            .iter()
+            .take_while(|k| k.0 == lowest)
+            .find(|k| prefer(k.2))
+            .copied()
+            .or_else(|| self.ready.first().copied())?;
+        self.ready.remove(&key);
+        let w = key.2;
         self.task[w] = Task::Taken;
         Some(w)
     }
@@ -114,14 +129,44 @@ mod tests {
     }
 
     #[test]
+    fn a_preferred_world_is_taken_first_only_among_the_laggards() {
+        let mut s = Schedule::new(3);
+        s.wake((5, Reverse(9), 0));
+        s.wake((5, Reverse(1), 1));
+        s.wake((7, Reverse(1), 2));
+        assert_eq!(
+            s.take_ready_preferring(|w| w == 2),
+            Some(0),
+            "world 2 is ahead"
+        );
+        assert_eq!(s.take_ready_preferring(|w| w == 2), Some(1));
+        s.locked(0);
+        s.locked(1);
+        s.wake((5, Reverse(9), 0));
+        s.wake((5, Reverse(1), 1));
+        assert_eq!(
+            s.take_ready_preferring(|w| w == 1),
+            Some(1),
+            "equally behind: preferred"
+        );
+        assert_eq!(s.take_ready_preferring(|_| false), Some(0));
+        assert_eq!(s.take_ready_preferring(|_| false), Some(2));
+        assert_eq!(s.take_ready_preferring(|_| true), None);
+    }
+
+    #[test]
     fn waking_a_waiting_world_makes_it_ready_and_its_token_stale() {
         let mut s = Schedule::new(2);
         s.wake(key(1, 0));
-        assert_eq!(s.take_ready(), Some(0));
+        assert_eq!(s.take_ready_preferring(|_| false), Some(0));
         s.locked(0);
         let token = s.wait(0).expect("an idle world waits");
         s.wake(key(1, 0));
-        assert_eq!(s.take_ready(), Some(0), "woken into the ready set");
+        assert_eq!(
+            s.take_ready_preferring(|_| false),
+            Some(0),
+            "woken into the ready set"
+        );
         assert!(!s.take_waiting(0, token), "the old token is stale");
     }
 
@@ -130,8 +175,12 @@ mod tests {
         let mut s = Schedule::new(2);
         s.wake(key(3, 1));
         s.wake(key(2, 1));
-        assert_eq!(s.take_ready(), Some(1));
-        assert_eq!(s.take_ready(), None, "the second wake queued no copy");
+        assert_eq!(s.take_ready_preferring(|_| false), Some(1));
+        assert_eq!(
+            s.take_ready_preferring(|_| false),
+            None,
+            "the second wake queued no copy"
+        );
         // Taken (not yet locked): a wake adds no copy either; the taker will see the news.
         s.wake(key(2, 1));
         assert!(!s.any_ready());
@@ -141,11 +190,11 @@ mod tests {
     fn a_world_woken_during_its_turn_stays_ready_instead_of_waiting() {
         let mut s = Schedule::new(1);
         s.wake(key(1, 0));
-        assert_eq!(s.take_ready(), Some(0));
+        assert_eq!(s.take_ready_preferring(|_| false), Some(0));
         s.locked(0);
         s.wake(key(1, 0));
         assert_eq!(s.wait(0), None);
-        assert_eq!(s.take_ready(), Some(0));
+        assert_eq!(s.take_ready_preferring(|_| false), Some(0));
     }
 
     #[test]
@@ -154,7 +203,7 @@ mod tests {
         s.wake((5, Reverse(10), 0));
         s.wake((4, Reverse(1), 1));
         s.wake((5, Reverse(90), 2));
-        let order: Vec<_> = std::iter::from_fn(|| s.take_ready()).collect();
+        let order: Vec<_> = std::iter::from_fn(|| s.take_ready_preferring(|_| false)).collect();
         assert_eq!(order, vec![1, 2, 0]);
     }
 

@@ -103,6 +103,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         home: (0..n)
             .map(|w| F::Atomic::new((w % threads) as u64))
             .collect(),
+        stay_home: n <= threads,
         waiting: Injector::new(),
         gvt: F::Atomic::new(1),
         committed: F::Atomic::new(0),

@@ -63,6 +63,10 @@ pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     pub(super) cost: Vec<F::Atomic>,
     /// Per world, the thread that last ran an action of it (to count migrations).
     pub(super) home: Vec<F::Atomic>,
+    /// Whether a thread prefers, among equally critical ready worlds, one it ran last: with
+    /// no more worlds than threads each world then stays on one core (its cache warm);
+    /// with more, the heaviest world first matters more.
+    pub(super) stay_home: bool,
     /// Tokens of worlds that had to wait (postponed behind a laggard, or running elsewhere):
     /// any thread takes them when nothing is ready, so a waiting world never sits behind a
     /// busy thread's work. A token is live only while the schedule still holds it.

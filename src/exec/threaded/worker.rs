@@ -77,7 +77,13 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
     /// Counts in `steals` the tasks of worlds another thread ran last.
     /// Stale waiting tokens (of worlds woken since) are dropped on the way.
     fn find_task(&self, me: usize, steals: &mut u64) -> Option<usize> {
-        let first = self.sched.lock().take_ready();
+        // With no more worlds than threads, among equally critical worlds the one this
+        // thread ran last (its cache is warm): in a near-lockstep run each world then stays
+        // on one core.
+        let first = self
+            .sched
+            .lock()
+            .take_ready_preferring(|w| self.stay_home && self.home[w].load() == me as u64);
         let task = first.or_else(|| loop {
             match self.waiting.steal() {
                 Steal::Success((w, token)) => {

@@ -84,7 +84,8 @@ impl Prepared {
         for (x, n) in nbrs.iter().enumerate() {
             let len = slot.state(OwnCell::from_local(x as u32)).len();
             own_entities += len;
-            let keeps = self.neighbourhood_at_rest(n);
+            // An empty cell is not computed anyway.
+            let keeps = len > 0 && self.neighbourhood_at_rest(n);
             self.own_keeps.push(keeps);
             if !keeps {
                 computed += len;
