@@ -1,7 +1,10 @@
 //! Threaded executor against the reference, side by side in one run: `falling-cubes`
 //! (`TH_CUBES`, default 8000) for `TH_STEPS` steps (default 600 = 10 simulated seconds),
 //! the threaded executor on `TH_THREADS` threads (default 2) with each world count of
-//! `TH_WORLDS` (default "2,4,8") and each window of `TH_WINDOW` (default "16"), `cell` mode. Prints wall
+//! `TH_WORLDS` (default "2,4,8"), each window of `TH_WINDOW` (default "16") and each
+//! laggard lead of `TH_LEAD` (default "0", `--lead` of `soda run`), `cell` mode;
+//! `TH_REPS` (default 1) repetitions, each timing the reference again beside every case,
+//! then the median of each case's pair ratios. Prints wall
 //! times, the speed-up over the reference, efficiency, rollbacks and the threads' busy,
 //! GVT and idle time, and checks every committed hash against the reference's.
 //!
@@ -20,7 +23,8 @@ mod rapier_world;
 
 use common::Footprint;
 use rapier_world::RapierWorld;
-use soda::exec::threaded::run_threaded;
+use soda::exec::sync::StdFacade;
+use soda::exec::threaded::{run_threaded_with, ThreadedOptions, ThreadedSetup};
 use soda::kernel::{KernelConfig, RollbackMode};
 use soda::scene::builtin::builtin;
 use soda::ReferenceRun;
@@ -46,15 +50,24 @@ fn main() {
         .split(',')
         .map(|w| w.trim().parse().expect("TH_WINDOW"))
         .collect();
+    let leads: Vec<u64> = env("TH_LEAD", "0", "0,1")
+        .split(',')
+        .map(|l| l.trim().parse().expect("TH_LEAD"))
+        .collect();
     let worlds: Vec<usize> = env("TH_WORLDS", "2,4,8", "2,4")
         .split(',')
         .map(|w| w.trim().parse().expect("TH_WORLDS"))
         .collect();
+    let reps: usize = env("TH_REPS", "1", "1").parse().expect("TH_REPS");
     let scene = builtin("falling-cubes", Some(cubes), 0).expect("scene");
-    let (mut reference, _) = ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
-    let t = Instant::now();
-    let expected: Vec<u64> = (0..steps).map(|_| reference.advance().hash).collect();
-    let tr = t.elapsed().as_secs_f64();
+    let run_reference = || {
+        let (mut reference, _) =
+            ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
+        let t = Instant::now();
+        let hashes: Vec<u64> = (0..steps).map(|_| reference.advance().hash).collect();
+        (hashes, t.elapsed().as_secs_f64())
+    };
+    let (expected, tr) = run_reference();
     println!(
         "threaded: falling-cubes {cubes}, {steps} steps, grid {:?}; reference {tr:.2} s ({:.0} body-steps/s)",
         scene.grid().dims,
@@ -78,38 +91,62 @@ fn main() {
         r1 / r2,
         tr / r1
     );
-    for (&w, &window) in worlds
+    let cases: Vec<(usize, u64, u64)> = worlds
         .iter()
-        .flat_map(|w| windows.iter().map(move |v| (w, v)))
-    {
-        let config = KernelConfig::new(w).mode(RollbackMode::Cell).window(window);
-        let r = run_threaded(
-            scene.model(),
-            scene.grid(),
-            scene.initial_bodies(),
-            &config,
-            threads,
-            steps,
-        )
-        .expect("threaded run");
-        let got: Vec<u64> = r.frames.iter().map(|f| f.hash).collect();
-        assert_eq!(got, expected, "threaded run diverged from the reference");
-        let c = &r.counters.total;
-        let tt = &r.times;
-        println!(
-            "  {threads} threads, {w:2} worlds, cell W{window}: {:.2} s = {:.2}x the reference's speed; efficiency {:.3}, rollbacks {} ({} steps), cells re-executed {}, messages {} + {} anti; thread time busy {:.2} s, gvt {:.2} s, idle {:.2} s, steals {}",
-            r.wall_seconds,
-            tr / r.wall_seconds,
-            c.efficiency(),
-            c.rollbacks(),
-            c.steps_rolled_back,
-            c.cells_recomputed,
-            c.messages_sent,
-            c.anti_messages_sent,
-            tt.busy_seconds,
-            tt.gvt_seconds,
-            tt.idle_seconds,
-            tt.steals
-        );
+        .flat_map(|&w| {
+            let leads = &leads;
+            windows
+                .iter()
+                .flat_map(move |&v| leads.iter().map(move |&l| (w, v, l)))
+        })
+        .collect();
+    // Each repetition times the reference again, then every case: the speed-up of a case is
+    // the median over repetitions of (reference time / case time) measured side by side.
+    let mut ratios: Vec<Vec<f64>> = vec![Vec::new(); cases.len()];
+    for rep in 0..reps {
+        let tr = if rep == 0 { tr } else { run_reference().1 };
+        if rep > 0 {
+            println!("  rep {}: reference {tr:.2} s", rep + 1);
+        }
+        for (k, &(w, window, lead)) in cases.iter().enumerate() {
+            let config = KernelConfig::new(w).mode(RollbackMode::Cell).window(window);
+            let r = run_threaded_with::<_, StdFacade>(
+                ThreadedSetup::new(scene.model(), scene.grid(), scene.initial_bodies()),
+                &ThreadedOptions::new(&config, threads, steps).lead(lead),
+                |_, _| {},
+            )
+            .expect("threaded run");
+            let got: Vec<u64> = r.frames.iter().map(|f| f.hash).collect();
+            assert_eq!(got, expected, "threaded run diverged from the reference");
+            ratios[k].push(tr / r.wall_seconds);
+            let c = &r.counters.total;
+            let tt = &r.times;
+            println!(
+                "  {threads} threads, {w:2} worlds, cell W{window}, lead {lead}: {:.2} s = {:.2}x the reference's speed; efficiency {:.3}, rollbacks {} ({} steps), cells re-executed {}, messages {} + {} anti; thread time busy {:.2} s, gvt {:.2} s, idle {:.2} s, steals {}",
+                r.wall_seconds,
+                tr / r.wall_seconds,
+                c.efficiency(),
+                c.rollbacks(),
+                c.steps_rolled_back,
+                c.cells_recomputed,
+                c.messages_sent,
+                c.anti_messages_sent,
+                tt.busy_seconds,
+                tt.gvt_seconds,
+                tt.idle_seconds,
+                tt.steals
+            );
+        }
+    }
+    if reps > 1 {
+        for (k, &(w, window, lead)) in cases.iter().enumerate() {
+            let mut r = ratios[k].clone();
+            r.sort_by(f64::total_cmp);
+            println!(
+                "  median of {reps} pair ratios, {w} worlds, W{window}, lead {lead}: {:.2}x the reference's speed (runs: {})",
+                r[r.len() / 2],
+                r.iter().map(|x| format!("{x:.2}")).collect::<Vec<_>>().join(", ")
+            );
+        }
     }
 }
