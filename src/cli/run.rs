@@ -839,11 +839,12 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
             lines.push((
                 "thread time",
                 format!(
-                    "busy {} s, gvt {} s, idle {} s (summed over threads), {} steals",
+                    "busy {} s, gvt {} s, idle {} s (summed over threads), {} steals, {} moves",
                     num(t.busy_seconds),
                     num(t.gvt_seconds),
                     num(t.idle_seconds),
-                    t.steals
+                    t.steals,
+                    t.moves
                 ),
             ));
         }

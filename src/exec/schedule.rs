@@ -80,18 +80,21 @@ impl Schedule {
     /// equally behind), the best one for which `prefer` holds (the threaded executor
     /// prefers a world the taking thread ran last: its states are in that core's cache),
     /// else the best ready world.
+    /// Worlds for which `leave` holds are not taken (another thread is about to).
     pub(crate) fn take_ready_preferring(
         &mut self,
         prefer: impl Fn(usize) -> bool,
+        leave: impl Fn(usize) -> bool,
     ) -> Option<usize> {
-        let lowest = self.ready.first()?.0;
+        let lowest = self.ready.iter().find(|k| !leave(k.2))?.0;
         let key = self
             .ready
             .iter()
+            .filter(|k| !leave(k.2))
             .take_while(|k| k.0 == lowest)
             .find(|k| prefer(k.2))
             .copied()
-            .or_else(|| self.ready.first().copied())?;
+            .or_else(|| self.ready.iter().find(|k| !leave(k.2)).copied())?;
         self.ready.remove(&key);
         let w = key.2;
         self.task[w] = Task::Taken;
@@ -135,35 +138,40 @@ mod tests {
         s.wake((5, Reverse(1), 1));
         s.wake((7, Reverse(1), 2));
         assert_eq!(
-            s.take_ready_preferring(|w| w == 2),
+            s.take_ready_preferring(|w| w == 2, |_| false),
             Some(0),
             "world 2 is ahead"
         );
-        assert_eq!(s.take_ready_preferring(|w| w == 2), Some(1));
+        assert_eq!(s.take_ready_preferring(|w| w == 2, |_| false), Some(1));
         s.locked(0);
         s.locked(1);
         s.wake((5, Reverse(9), 0));
         s.wake((5, Reverse(1), 1));
         assert_eq!(
-            s.take_ready_preferring(|w| w == 1),
+            s.take_ready_preferring(|w| w == 1, |_| false),
             Some(1),
             "equally behind: preferred"
         );
-        assert_eq!(s.take_ready_preferring(|_| false), Some(0));
-        assert_eq!(s.take_ready_preferring(|_| false), Some(2));
-        assert_eq!(s.take_ready_preferring(|_| true), None);
+        assert_eq!(
+            s.take_ready_preferring(|_| false, |w| w == 0),
+            Some(2),
+            "0 is left"
+        );
+        assert_eq!(s.take_ready_preferring(|_| false, |w| w == 0), None);
+        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(0));
+        assert_eq!(s.take_ready_preferring(|_| true, |_| false), None);
     }
 
     #[test]
     fn waking_a_waiting_world_makes_it_ready_and_its_token_stale() {
         let mut s = Schedule::new(2);
         s.wake(key(1, 0));
-        assert_eq!(s.take_ready_preferring(|_| false), Some(0));
+        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(0));
         s.locked(0);
         let token = s.wait(0).expect("an idle world waits");
         s.wake(key(1, 0));
         assert_eq!(
-            s.take_ready_preferring(|_| false),
+            s.take_ready_preferring(|_| false, |_| false),
             Some(0),
             "woken into the ready set"
         );
@@ -175,9 +183,9 @@ mod tests {
         let mut s = Schedule::new(2);
         s.wake(key(3, 1));
         s.wake(key(2, 1));
-        assert_eq!(s.take_ready_preferring(|_| false), Some(1));
+        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(1));
         assert_eq!(
-            s.take_ready_preferring(|_| false),
+            s.take_ready_preferring(|_| false, |_| false),
             None,
             "the second wake queued no copy"
         );
@@ -190,11 +198,11 @@ mod tests {
     fn a_world_woken_during_its_turn_stays_ready_instead_of_waiting() {
         let mut s = Schedule::new(1);
         s.wake(key(1, 0));
-        assert_eq!(s.take_ready_preferring(|_| false), Some(0));
+        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(0));
         s.locked(0);
         s.wake(key(1, 0));
         assert_eq!(s.wait(0), None);
-        assert_eq!(s.take_ready_preferring(|_| false), Some(0));
+        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(0));
     }
 
     #[test]
@@ -203,7 +211,8 @@ mod tests {
         s.wake((5, Reverse(10), 0));
         s.wake((4, Reverse(1), 1));
         s.wake((5, Reverse(90), 2));
-        let order: Vec<_> = std::iter::from_fn(|| s.take_ready_preferring(|_| false)).collect();
+        let order: Vec<_> =
+            std::iter::from_fn(|| s.take_ready_preferring(|_| false, |_| false)).collect();
         assert_eq!(order, vec![1, 2, 0]);
     }
 

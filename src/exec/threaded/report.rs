@@ -25,6 +25,9 @@ pub struct ThreadTimes {
     pub actions: u64,
     /// Tasks of a world that another thread ran last (migrations between threads).
     pub steals: u64,
+    /// Actions of a world on another thread than its previous action's (the world's states
+    /// then leave one core's cache for another's).
+    pub moves: u64,
 }
 
 /// The result of a threaded run.

@@ -104,6 +104,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
             .map(|w| F::Atomic::new((w % threads) as u64))
             .collect(),
         stay_home: n <= threads,
+        idle: (0..threads).map(|_| F::Atomic::new(0)).collect(),
         waiting: Injector::new(),
         gvt: F::Atomic::new(1),
         committed: F::Atomic::new(0),

@@ -67,6 +67,9 @@ pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     /// no more worlds than threads each world then stays on one core (its cache warm);
     /// with more, the heaviest world first matters more.
     pub(super) stay_home: bool,
+    /// Per thread, 1 while it backs off for want of a task: with `stay_home`, a world whose
+    /// home thread is idle is left to that thread, which takes it on its next look.
+    pub(super) idle: Vec<F::Atomic>,
     /// Tokens of worlds that had to wait (postponed behind a laggard, or running elsewhere):
     /// any thread takes them when nothing is ready, so a waiting world never sits behind a
     /// busy thread's work. A token is live only while the schedule still holds it.

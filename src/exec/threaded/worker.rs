@@ -24,7 +24,9 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         let mut spins = 0u32;
         while self.status() == RunStatus::Running {
             let t0 = Instant::now();
-            match self.find_task(me, &mut times.steals) {
+            let task = self.find_task(me, &mut times.steals);
+            self.idle[me].store(u64::from(task.is_none()));
+            match task {
                 Some(w) => {
                     let acted = self.run_world(w, me, &mut times);
                     if acted {
@@ -71,6 +73,7 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         out.times.idle_seconds += times.idle_seconds;
         out.times.actions += times.actions;
         out.times.steals += times.steals;
+        out.times.moves += times.moves;
     }
 
     /// The next world task for thread `me`: the best ready world, else a waiting one.
@@ -80,13 +83,20 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         // With no more worlds than threads, among equally critical worlds the one this
         // thread ran last (its cache is warm): in a near-lockstep run each world then stays
         // on one core.
+        // A world whose home is another, idle, thread is left to it.
+        let home = |w: usize| self.home[w].load() as usize;
+        let leave = |w: usize| self.stay_home && home(w) != me && self.idle[home(w)].load() == 1;
         let first = self
             .sched
             .lock()
-            .take_ready_preferring(|w| self.stay_home && self.home[w].load() == me as u64);
+            .take_ready_preferring(|w| self.stay_home && home(w) == me, leave);
         let task = first.or_else(|| loop {
             match self.waiting.steal() {
                 Steal::Success((w, token)) => {
+                    if leave(w) {
+                        self.waiting.push((w, token));
+                        break None;
+                    }
                     if self.sched.lock().take_waiting(w, token) {
                         break Some(w);
                     }
@@ -190,6 +200,7 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         self.published[w].store(bound);
         if acted {
             // The world's home follows the thread that computes it.
+            times.moves += u64::from(self.home[w].load() != me as u64);
             self.home[w].store(me as u64);
             if world.wants_to_act(self.gvt.load()) {
                 self.schedule(w);
