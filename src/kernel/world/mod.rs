@@ -374,7 +374,7 @@ impl<M: CellModel> World<M> {
         } else {
             // A repair waiting for announced ghosts resumes when news arrives, or when the
             // world holds GVT back (K5).
-            !self.waiting || self.lvt() + 1 <= gvt
+            !self.waiting || self.lvt() < gvt
         }
     }
 

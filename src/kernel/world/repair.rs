@@ -60,9 +60,9 @@ impl<M: CellModel> World<M> {
             .get(&key)
             .and_then(|r| r.effective())
             .is_some_and(|e| e.follows)
-            && !self.slots[i]
+            && self.slots[i]
                 .recv
                 .get(&key)
-                .is_some_and(|r| r.effective().is_some())
+                .is_none_or(|r| r.effective().is_none())
     }
 }
