@@ -78,6 +78,25 @@ impl Row {
         assert_eq!(msgs.len(), 1);
         msgs.remove(0)
     }
+
+    /// World 0's ghosts of cell 2 at steps 0 and 1, addressed to world 1, after world 0
+    /// computed step 0 (alone, its particles keep their states): the ghost of step 0
+    /// announces the ghost of step 1 (`follows`, delta ghosts).
+    fn ghosts_of_cell_2(&self) -> [Message<Particle>; 2] {
+        let mut w0 = self.world(0, RollbackMode::Cell);
+        let mut sent = w0.start();
+        w0.set_end(1);
+        sent.extend(w0.act(1));
+        let mut msgs: Vec<_> = sent
+            .into_iter()
+            .filter(|m| m.dst_world == 1 && m.kind == MessageKind::Ghost && m.src_cell == 2)
+            .collect();
+        assert_eq!(msgs.len(), 2);
+        assert!(msgs[0].step == 0 && msgs[0].follows);
+        assert!(msgs[1].step == 1 && !msgs[1].follows);
+        let g1 = msgs.pop().unwrap();
+        [msgs.pop().unwrap(), g1]
+    }
 }
 
 /// Cell 2 holds a particle close enough to the one in cell 3 to push it; cell 5 holds an
@@ -95,7 +114,9 @@ fn straggler_ghost_recomputes_exactly_the_dependent_cells() {
     let r = pushing_scene();
     let (mut w1, _) = r.world1_ahead(RollbackMode::Cell, 4);
     w1.set_recording(true);
-    w1.receive(r.ghost_of_cell_2());
+    for g in r.ghosts_of_cell_2() {
+        w1.receive(g);
+    }
     settle(&mut w1);
     // Only cell 3 depends on cell 2's particle (cell 4 is empty, cell 5 is out of reach).
     assert_eq!(
@@ -105,6 +126,36 @@ fn straggler_ghost_recomputes_exactly_the_dependent_cells() {
     let c = w1.counters();
     assert_eq!((c.rollbacks_primary, c.rollback_length_primary), (1, 4));
     assert_eq!(w1.lvt(), 4);
+}
+
+#[test]
+fn a_repair_waits_for_the_ghost_its_straggler_announced() {
+    // The ghost of step 0 alone: cell 3 is re-executed at step 0, and its changed state
+    // dirties it at step 1, where it reads cell 2's view, which the ghost announced to
+    // change. The repair waits there (SPEC.md §K5) instead of running to the head with a
+    // view about to change; the announced ghost resumes it, and each cell-step is
+    // re-executed once, as when both ghosts arrive together.
+    let r = pushing_scene();
+    let (mut w1, _) = r.world1_ahead(RollbackMode::Cell, 4);
+    w1.set_recording(true);
+    let [g0, g1] = r.ghosts_of_cell_2();
+    w1.receive(g0);
+    settle(&mut w1);
+    assert_eq!(w1.take_record().recomputations(), vec![(0, 3)]);
+    assert_eq!(w1.lvt(), 1);
+    assert!(!w1.wants_to_act(1), "a waiting repair waits for a message");
+    w1.receive(g1);
+    assert!(w1.wants_to_act(1));
+    settle(&mut w1);
+    assert_eq!(
+        w1.take_record().recomputations(),
+        vec![(1, 3), (2, 3), (3, 3)]
+    );
+    assert_eq!(w1.lvt(), 4);
+    // Two stragglers (steps 0 and 1: lengths 4 and 3), each cell-step re-executed once.
+    let c = w1.counters();
+    assert_eq!((c.rollbacks_primary, c.rollback_length_primary), (2, 7));
+    assert_eq!(c.cells_recomputed, 4);
 }
 
 #[test]
@@ -159,10 +210,11 @@ fn early_cutoff_stops_propagation_when_recomputed_states_are_unchanged() {
     assert_eq!(before, after);
 }
 
-/// Lets a world apply its inbox and repair (re-execute) up to its head; the messages sent.
+/// Lets a world apply its inbox and repair (re-execute) up to its head, or until its repair
+/// waits for an announced ghost; the messages sent.
 fn settle(w: &mut World<Particles>) -> Vec<Message<Particle>> {
     let mut out = Vec::new();
-    while w.has_inbox() || w.lvt() < w.head() {
+    while w.wants_to_act(1) {
         out.extend(w.act(1));
     }
     out
@@ -238,7 +290,9 @@ fn migration_across_a_border_inside_a_rolled_back_interval_is_cancelled() {
     assert_eq!(crossing.bodies[0].cell, 2);
     assert!(w1.cell_state(3, 5).unwrap().is_empty());
 
-    w1.receive(r.ghost_of_cell_2());
+    for g in r.ghosts_of_cell_2() {
+        w1.receive(g);
+    }
     let repair = settle(&mut w1);
     let antis: Vec<&Message<Particle>> = repair
         .iter()

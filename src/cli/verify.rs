@@ -26,7 +26,7 @@ Examples:
 Every line names one run and whether each of its committed steps hashed like the
 reference's. A divergence names the first step, body, field and cell that differ and
 prints the `soda run` command that reproduces it (virtual runs replay exactly from their
-schedule seed). The exit status is 1 if any run diverged.";
+schedule seed, with the same number of steps). The exit status is 1 if any run diverged.";
 
 /// The help of `--objects` under `soda verify`, whose built-ins default to
 /// [`VERIFY_OBJECTS`] bodies.
@@ -197,9 +197,12 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
                 seed: check.schedule_seed,
                 ranks: check.ranks,
             };
+            // A virtual run's schedule depends on the steps it computes (which worlds may
+            // still advance), so it replays exactly only with the checked run's step count.
+            let upto = if c.seed.is_some() { args.steps } else { step };
             text += &format!(
                 "         reproduce: {}\n",
-                reproduce(args, &scene_args, &c, step, threads)
+                reproduce(args, &scene_args, &c, upto, threads)
             );
         }
         if printed.is_ok() {

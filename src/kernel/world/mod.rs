@@ -26,6 +26,7 @@ mod log;
 mod prepared;
 mod receive;
 mod recompute;
+mod repair;
 mod send;
 mod territory;
 mod throttle;
@@ -134,6 +135,10 @@ pub struct World<M: CellModel> {
     origin: Step,
     /// Ghosts to (re)evaluate at the end of the current action, as (step, own cell).
     ghost_due: BTreeSet<(Step, OwnCell)>,
+    /// Cell mode with delta ghosts: its repair stopped at a step whose remaining dirty
+    /// cells read a view a ghost announced to change (K5); it waits for news (cleared by
+    /// [`World::receive`]).
+    waiting: bool,
 }
 
 impl<M: CellModel> World<M> {
@@ -325,6 +330,7 @@ impl<M: CellModel> World<M> {
     pub fn receive(&mut self, msg: Message<M::State>) {
         debug_assert_eq!(msg.dst_world, self.id);
         self.idle_at = None;
+        self.waiting = false;
         let prev = self.inbox.insert(msg.key(), msg);
         debug_assert!(prev.is_none(), "duplicate message");
     }
@@ -354,7 +360,9 @@ impl<M: CellModel> World<M> {
 
     /// Whether acting now may do something. In conservative mode an action may still find
     /// every cell waiting for its neighbours; after such an idle action the world does not
-    /// want to act again until it receives a message or GVT changes.
+    /// want to act again until it receives a message or GVT changes. Likewise a cell-mode
+    /// repair that stopped to wait for announced ghosts (SPEC.md §K5) waits for a message,
+    /// or for GVT to reach its LVT + 1.
     pub fn wants_to_act(&self, gvt: Step) -> bool {
         if !self.inbox.is_empty() {
             return true;
@@ -364,8 +372,12 @@ impl<M: CellModel> World<M> {
             // After an action that could not compute anything, only news (a message) or a
             // wider window (a new GVT) can unblock a cell.
             self.idle_at != Some(gvt) && lvt < self.end && lvt + 1 < gvt + self.window
+        } else if self.dirty.is_empty() {
+            self.may_advance(gvt)
         } else {
-            !self.dirty.is_empty() || self.may_advance(gvt)
+            // A repair waiting for announced ghosts resumes when news arrives, or when the
+            // world holds GVT back (K5).
+            !self.waiting || self.lvt() < gvt
         }
     }
 
@@ -413,12 +425,32 @@ impl<M: CellModel> World<M> {
         if !self.inbox.is_empty() {
             self.drain_inbox();
         } else if !self.dirty.is_empty() {
+            self.waiting = false;
             // Rollback and Propagate runs to the head in one action (thesis Algorithm 2), so
-            // other worlds see the repaired outputs as early as possible.
+            // other worlds see the repaired outputs as early as possible — up to the first
+            // step with cells that wait for an announced ghost (cell mode, delta ghosts).
             while let Some(&s) = self.dirty.keys().next() {
+                // A world that holds GVT back (its LVT + 1 = GVT) does not wait (K5).
+                let waiting = if s + 1 > gvt {
+                    self.take_waiting(s)
+                } else {
+                    BTreeSet::new()
+                };
+                if !waiting.is_empty() {
+                    // Repair what does not wait, then wait for the announced ghosts: their
+                    // arrival would dirty these cells again (K5).
+                    if self.dirty.contains_key(&s) {
+                        self.reexecute(s, out);
+                    }
+                    self.dirty.insert(s, waiting);
+                    self.waiting = true;
+                    break;
+                }
                 self.reexecute(s, out);
             }
-            if let Some(r) = &mut self.record {
+            // A repair that waits is finished later, still attributed to the same rollback
+            // (or to a later one).
+            if let (Some(r), false) = (&mut self.record, self.waiting) {
                 r.repaired();
             }
         } else if self.may_advance(gvt) {
