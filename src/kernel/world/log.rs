@@ -4,6 +4,7 @@
 
 use super::index::{MarginCell, OwnCell, PerOwnCell};
 use super::keys::{MigrationIn, RecvKey, SentKey};
+use super::territory::Nb;
 use super::World;
 use crate::frame::Event;
 use crate::kernel::message::{Bodies, EntityEdit, Homed};
@@ -265,6 +266,16 @@ impl<S: Clone, E: Clone> Slot<S, E> {
     /// The view of margin cell `m` (empty if none).
     pub(super) fn ghost(&self, m: MarginCell) -> &[S] {
         view(&self.ghosts[m.index()])
+    }
+
+    /// The states it holds for neighbour `n`: an own cell's state, a margin cell's view,
+    /// nothing outside the grid.
+    pub(super) fn neighbour(&self, n: Nb) -> &[S] {
+        match n {
+            Nb::Outside => &[],
+            Nb::Own(x) => self.state(x),
+            Nb::Margin(m) => self.ghost(m),
+        }
     }
 
     /// An empty slot for `own` own cells and `margin` margin cells.

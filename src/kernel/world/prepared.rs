@@ -21,18 +21,41 @@ pub(super) struct Prepared {
     /// The step whose states they describe (`None`: nothing held).
     step: Option<Step>,
     /// The hints of every entity, cell after cell in ascending global order; empty if the
-    /// model gives none.
+    /// model gives none (or they are not worth computing this step).
     hints: Vec<Hint>,
-    /// Per own cell, where its hints start in `hints`.
-    own_start: Vec<u32>,
-    /// Per margin cell, where its hints start in `hints`.
-    margin_start: Vec<u32>,
-    /// Per own cell, whether every entity it holds is at rest (an empty cell is).
-    own_rest: Vec<bool>,
-    /// Per margin cell, whether every entity it holds is at rest.
-    margin_rest: Vec<bool>,
+    /// Per own cell, its facts.
+    own: Vec<CellFacts>,
+    /// Per margin cell, its facts.
+    margin: Vec<CellFacts>,
     /// Per own cell, whether its whole neighbourhood is at rest: it keeps its state.
     own_keeps: Vec<bool>,
+}
+
+/// What is prepared about one own or margin cell.
+#[derive(Clone, Copy, Debug)]
+struct CellFacts {
+    /// Where its entities' hints start in [`Prepared::hints`].
+    start: u32,
+    /// Whether every entity it holds is at rest (an empty cell is).
+    rest: bool,
+}
+
+/// The own and margin cells (`cells`, `margin`: global indices, each ascending) in ascending
+/// global order.
+fn in_global_order<'a>(cells: &'a [u32], margin: &'a [u32]) -> impl Iterator<Item = Nb> + 'a {
+    let (mut x, mut m) = (0, 0);
+    std::iter::from_fn(move || {
+        let own = x < cells.len() && (m == margin.len() || cells[x] < margin[m]);
+        if own {
+            x += 1;
+            Some(Nb::Own(OwnCell::from_local(x as u32 - 1)))
+        } else if m < margin.len() {
+            m += 1;
+            Some(Nb::Margin(MarginCell::at(m - 1)))
+        } else {
+            None
+        }
+    })
 }
 
 impl Prepared {
@@ -53,30 +76,20 @@ impl Prepared {
         debug_assert!(cells.is_sorted() && margin.is_sorted());
         self.step = Some(step);
         self.hints.clear();
-        self.own_start.clear();
-        self.margin_start.clear();
-        self.own_rest.clear();
-        self.margin_rest.clear();
+        self.own.clear();
+        self.margin.clear();
         self.own_keeps.clear();
         // Where each cell's hints would start, and whether it is at rest.
         let mut total = 0u32;
-        let (mut x, mut m) = (0, 0);
-        while x < cells.len() || m < margin.len() {
-            let own = m == margin.len() || (x < cells.len() && cells[x] < margin[m]);
-            let states = if own {
-                slot.state(OwnCell::from_local(x as u32))
-            } else {
-                slot.ghost(MarginCell::at(m))
+        for n in in_global_order(cells, margin) {
+            let states = slot.neighbour(n);
+            let facts = CellFacts {
+                start: total,
+                rest: states.iter().all(|s| model.at_rest(s)),
             };
-            let rest = states.iter().all(|s| model.at_rest(s));
-            if own {
-                self.own_start.push(total);
-                self.own_rest.push(rest);
-                x += 1;
-            } else {
-                self.margin_start.push(total);
-                self.margin_rest.push(rest);
-                m += 1;
+            match n {
+                Nb::Own(_) => self.own.push(facts),
+                _ => self.margin.push(facts),
             }
             total += states.len() as u32;
         }
@@ -85,7 +98,7 @@ impl Prepared {
             let len = slot.state(OwnCell::from_local(x as u32)).len();
             own_entities += len;
             // An empty cell is not computed anyway.
-            let keeps = len > 0 && self.neighbourhood_at_rest(n);
+            let keeps = len > 0 && n.iter().all(|&k| self.facts(k).is_none_or(|f| f.rest));
             self.own_keeps.push(keeps);
             if !keeps {
                 computed += len;
@@ -94,24 +107,9 @@ impl Prepared {
         if computed == 0 || computed * 2 < own_entities {
             return;
         }
-        let first = (0..cells.len())
-            .map(|x| slot.state(OwnCell::from_local(x as u32)))
-            .find_map(|s| s.first());
-        if first.is_none_or(|s| model.hint(s).is_none()) {
-            return;
-        }
         self.hints.reserve(total as usize);
-        let (mut x, mut m) = (0, 0);
-        while x < cells.len() || m < margin.len() {
-            let own = m == margin.len() || (x < cells.len() && cells[x] < margin[m]);
-            let states = if own {
-                x += 1;
-                slot.state(OwnCell::from_local(x as u32 - 1))
-            } else {
-                m += 1;
-                slot.ghost(MarginCell::at(m - 1))
-            };
-            for s in states {
+        for n in in_global_order(cells, margin) {
+            for s in slot.neighbour(n) {
                 match model.hint(s) {
                     Some(h) => self.hints.push(h),
                     None => {
@@ -135,13 +133,13 @@ impl Prepared {
         self.step == Some(step) && self.own_keeps[x.index()]
     }
 
-    /// Whether every entity of the neighbourhood `nbrs` is at rest.
-    fn neighbourhood_at_rest(&self, nbrs: &[Nb; 27]) -> bool {
-        nbrs.iter().all(|n| match *n {
-            Nb::Outside => true,
-            Nb::Own(x) => self.own_rest[x.index()],
-            Nb::Margin(m) => self.margin_rest[m.index()],
-        })
+    /// The facts of neighbour `n` (`None` outside the grid).
+    fn facts(&self, n: Nb) -> Option<&CellFacts> {
+        match n {
+            Nb::Outside => None,
+            Nb::Own(x) => Some(&self.own[x.index()]),
+            Nb::Margin(m) => Some(&self.margin[m.index()]),
+        }
     }
 
     /// `nb` (the neighbourhood `nbrs` resolves at step `step`) with the hints of its
@@ -156,15 +154,12 @@ impl Prepared {
             return nb;
         }
         for r in 0..9 {
-            let row = 3 * r..3 * r + 3;
             let mut span: Option<(usize, usize)> = None;
-            for k in row {
-                let start = match nbrs[k] {
-                    Nb::Outside => continue,
-                    Nb::Own(x) => self.own_start[x.index()],
-                    Nb::Margin(m) => self.margin_start[m.index()],
-                } as usize;
-                let end = start + nb.cells[k].len();
+            for (k, &n) in nbrs.iter().enumerate().skip(3 * r).take(3) {
+                let Some(f) = self.facts(n) else {
+                    continue;
+                };
+                let (start, end) = (f.start as usize, f.start as usize + nb.cells[k].len());
                 debug_assert!(span.is_none_or(|(_, e)| e == start), "a row is contiguous");
                 span = Some(span.map_or((start, end), |(s, _)| (s, end)));
             }

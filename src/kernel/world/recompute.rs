@@ -5,7 +5,6 @@
 use super::index::{cells_around, OwnCell, PerOwnCell};
 use super::keys::MigrationIn;
 use super::log::{share, view, Out, Shared};
-use super::territory::Nb;
 use super::World;
 use crate::frame::{Event, LeftGrid};
 use crate::kernel::config::{PlantedBug, RollbackMode};
@@ -57,11 +56,7 @@ impl<M: CellModel> World<M> {
         let slot = &self.slots[self.si(s)];
         let c = grid.coord(cell as usize);
         let nbrs = &self.nbrs[x];
-        let cells: [&[M::State]; 27] = std::array::from_fn(|k| match nbrs[k] {
-            Nb::Outside => &[][..],
-            Nb::Own(n) => slot.state(n),
-            Nb::Margin(m) => slot.ghost(m),
-        });
+        let cells: [&[M::State]; 27] = std::array::from_fn(|k| slot.neighbour(nbrs[k]));
         let nb = self.prepared.attach(Neighbourhood::new(c, cells), nbrs, s);
         let mut events = Vec::new();
         self.scratch.clear();
