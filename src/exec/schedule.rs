@@ -79,22 +79,20 @@ impl Schedule {
     /// Takes a ready world: among those at the lowest published bound (the laggards, all
     /// equally behind), the best one for which `prefer` holds (the threaded executor
     /// prefers a world the taking thread ran last: its states are in that core's cache),
-    /// else the best ready world.
-    /// Worlds for which `leave` holds are not taken (another thread is about to).
+    /// else the best ready world. Worlds for which `leave` holds are not taken (another
+    /// thread is about to take them).
     pub(crate) fn take_ready_preferring(
         &mut self,
         prefer: impl Fn(usize) -> bool,
         leave: impl Fn(usize) -> bool,
     ) -> Option<usize> {
-        let lowest = self.ready.iter().find(|k| !leave(k.2))?.0;
-        let key = self
-            .ready
-            .iter()
-            .filter(|k| !leave(k.2))
-            .take_while(|k| k.0 == lowest)
+        let mut takeable = self.ready.iter().filter(|k| !leave(k.2));
+        let best = *takeable.next()?;
+        let key = std::iter::once(&best)
+            .chain(takeable.take_while(|k| k.0 == best.0))
             .find(|k| prefer(k.2))
             .copied()
-            .or_else(|| self.ready.iter().find(|k| !leave(k.2)).copied())?;
+            .unwrap_or(best);
         self.ready.remove(&key);
         let w = key.2;
         self.task[w] = Task::Taken;
@@ -127,6 +125,11 @@ impl Schedule {
 mod tests {
     use super::*;
 
+    /// The best ready world, no preference.
+    fn best(s: &mut Schedule) -> Option<usize> {
+        s.take_ready_preferring(|_| false, |_| false)
+    }
+
     fn key(bound: Step, w: usize) -> ReadyKey {
         (bound, Reverse(0), w)
     }
@@ -158,7 +161,7 @@ mod tests {
             "0 is left"
         );
         assert_eq!(s.take_ready_preferring(|_| false, |w| w == 0), None);
-        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(0));
+        assert_eq!(best(&mut s), Some(0));
         assert_eq!(s.take_ready_preferring(|_| true, |_| false), None);
     }
 
@@ -166,15 +169,11 @@ mod tests {
     fn waking_a_waiting_world_makes_it_ready_and_its_token_stale() {
         let mut s = Schedule::new(2);
         s.wake(key(1, 0));
-        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(0));
+        assert_eq!(best(&mut s), Some(0));
         s.locked(0);
         let token = s.wait(0).expect("an idle world waits");
         s.wake(key(1, 0));
-        assert_eq!(
-            s.take_ready_preferring(|_| false, |_| false),
-            Some(0),
-            "woken into the ready set"
-        );
+        assert_eq!(best(&mut s), Some(0), "woken into the ready set");
         assert!(!s.take_waiting(0, token), "the old token is stale");
     }
 
@@ -183,12 +182,8 @@ mod tests {
         let mut s = Schedule::new(2);
         s.wake(key(3, 1));
         s.wake(key(2, 1));
-        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(1));
-        assert_eq!(
-            s.take_ready_preferring(|_| false, |_| false),
-            None,
-            "the second wake queued no copy"
-        );
+        assert_eq!(best(&mut s), Some(1));
+        assert_eq!(best(&mut s), None, "the second wake queued no copy");
         // Taken (not yet locked): a wake adds no copy either; the taker will see the news.
         s.wake(key(2, 1));
         assert!(!s.any_ready());
@@ -198,11 +193,11 @@ mod tests {
     fn a_world_woken_during_its_turn_stays_ready_instead_of_waiting() {
         let mut s = Schedule::new(1);
         s.wake(key(1, 0));
-        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(0));
+        assert_eq!(best(&mut s), Some(0));
         s.locked(0);
         s.wake(key(1, 0));
         assert_eq!(s.wait(0), None);
-        assert_eq!(s.take_ready_preferring(|_| false, |_| false), Some(0));
+        assert_eq!(best(&mut s), Some(0));
     }
 
     #[test]
@@ -211,8 +206,7 @@ mod tests {
         s.wake((5, Reverse(10), 0));
         s.wake((4, Reverse(1), 1));
         s.wake((5, Reverse(90), 2));
-        let order: Vec<_> =
-            std::iter::from_fn(|| s.take_ready_preferring(|_| false, |_| false)).collect();
+        let order: Vec<_> = std::iter::from_fn(|| best(&mut s)).collect();
         assert_eq!(order, vec![1, 2, 0]);
     }
 

@@ -90,13 +90,13 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
             .sched
             .lock()
             .take_ready_preferring(|w| self.stay_home && home(w) == me, leave);
+        // Tokens left to their idle home thread go back to the queue afterwards, so this
+        // thread still reaches the tokens behind them.
+        let mut left = Vec::new();
         let task = first.or_else(|| loop {
             match self.waiting.steal() {
+                Steal::Success((w, token)) if leave(w) => left.push((w, token)),
                 Steal::Success((w, token)) => {
-                    if leave(w) {
-                        self.waiting.push((w, token));
-                        break None;
-                    }
                     if self.sched.lock().take_waiting(w, token) {
                         break Some(w);
                     }
@@ -105,6 +105,9 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
                 Steal::Empty => break None,
             }
         });
+        for t in left {
+            self.waiting.push(t);
+        }
         if let Some(w) = task {
             *steals += (self.home[w].load() != me as u64) as u64;
         }
