@@ -122,7 +122,7 @@ fn main() {
             let c = &r.counters.total;
             let tt = &r.times;
             println!(
-                "  {threads} threads, {w:2} worlds, cell W{window}, lead {lead}: {:.2} s = {:.2}x the reference's speed; efficiency {:.3}, rollbacks {} ({} steps), cells re-executed {}, messages {} + {} anti; thread time busy {:.2} s, gvt {:.2} s, idle {:.2} s, steals {}, moves {}",
+                "  {threads} threads, {w:2} worlds, cell W{window}, lead {lead}: {:.2} s = {:.2}x the reference's speed; efficiency {:.3}, rollbacks {} ({} steps), cells re-executed {}, messages {} + {} anti; thread time busy {:.2} s (ahead {:.2} s), gvt {:.2} s, idle {:.2} s, steals {}, moves {}",
                 r.wall_seconds,
                 tr / r.wall_seconds,
                 c.efficiency(),
@@ -132,6 +132,7 @@ fn main() {
                 c.messages_sent,
                 c.anti_messages_sent,
                 tt.busy_seconds,
+                tt.ahead_seconds,
                 tt.gvt_seconds,
                 tt.idle_seconds,
                 tt.steals,

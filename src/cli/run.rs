@@ -839,8 +839,9 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
             lines.push((
                 "thread time",
                 format!(
-                    "busy {} s, gvt {} s, idle {} s (summed over threads), {} steals, {} moves",
+                    "busy {} s (of which {} s computing ahead), gvt {} s, idle {} s (summed over threads), {} steals, {} moves",
                     num(t.busy_seconds),
+                    num(t.ahead_seconds),
                     num(t.gvt_seconds),
                     num(t.idle_seconds),
                     t.steals,

@@ -30,6 +30,12 @@ pub struct WorldCounters {
     /// Cell computations superseded by a re-execution of the same cell-step (never
     /// committed). At the end of a run `cells_computed = cells_committed + cells_rolled_back`.
     pub cells_rolled_back: u64,
+    /// Cell computations done ahead: a held-back world's interior cells computed before
+    /// its advance (SPEC.md §K5; included in `cells_computed`).
+    pub cells_ahead: u64,
+    /// Of those, the ones dropped because a state they read changed before the advance
+    /// (included in `cells_rolled_back`).
+    pub cells_ahead_dropped: u64,
     /// Steps re-executed (one per dirty step repaired). At the end of a run
     /// `steps_computed = steps_committed + steps_reexecuted`.
     pub steps_reexecuted: u64,
@@ -99,6 +105,8 @@ impl AddAssign<&WorldCounters> for WorldCounters {
         self.cells_recomputed += o.cells_recomputed;
         self.cells_committed += o.cells_committed;
         self.cells_rolled_back += o.cells_rolled_back;
+        self.cells_ahead += o.cells_ahead;
+        self.cells_ahead_dropped += o.cells_ahead_dropped;
         self.steps_reexecuted += o.steps_reexecuted;
         self.rollbacks_primary += o.rollbacks_primary;
         self.rollbacks_secondary += o.rollbacks_secondary;

@@ -163,10 +163,7 @@ impl RunOptions {
 
     /// The virtual executor's options these say.
     pub fn virtual_options(&self) -> VirtualOptions {
-        VirtualOptions {
-            schedule: self.schedule.clone(),
-            record_schedule: self.record_schedule,
-        }
+        VirtualOptions::new(self.schedule.clone()).record_schedule(self.record_schedule)
     }
 }
 

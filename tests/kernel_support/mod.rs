@@ -81,6 +81,8 @@ pub struct Case {
     pub partition_seed: u64,
     pub schedule_seed: u64,
     pub ghosts: GhostPolicy,
+    /// Worlds compute their interior ahead after each action (`VirtualOptions::compute_ahead`).
+    pub compute_ahead: bool,
 }
 
 impl Case {
@@ -97,7 +99,7 @@ impl Case {
 
     /// The virtual executor's options: the case's schedule seed.
     pub fn options(&self) -> VirtualOptions {
-        VirtualOptions::seeded(self.schedule_seed)
+        VirtualOptions::seeded(self.schedule_seed).compute_ahead(self.compute_ahead)
     }
 }
 
@@ -158,6 +160,7 @@ pub fn case(
         any::<u64>(),
         any::<u64>(),
         prop_oneof![Just(GhostPolicy::Delta), Just(GhostPolicy::Full)],
+        any::<bool>(),
     )
         .prop_map(
             |(
@@ -170,6 +173,7 @@ pub fn case(
                 partition_seed,
                 schedule_seed,
                 ghosts,
+                compute_ahead,
             )| Case {
                 scene,
                 steps,
@@ -180,6 +184,7 @@ pub fn case(
                 partition_seed,
                 schedule_seed,
                 ghosts,
+                compute_ahead,
             },
         )
 }

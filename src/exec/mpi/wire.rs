@@ -16,7 +16,7 @@
 //!          cell_len = home cell << 32 | state words
 //! frames   MAGIC_FRAMES  first_step  n_steps  (n_states (len word*len)*n_states
 //!          n_events (step body kind)*n_events)*n_steps  checksum
-//! counters MAGIC_COUNTERS  n_worlds  (world  value*23)*n_worlds  checksum
+//! counters MAGIC_COUNTERS  n_worlds  (world  value*25)*n_worlds  checksum
 //! ```
 
 use crate::frame::Event;
@@ -337,7 +337,7 @@ pub fn decode_frames<S, E>(
     Ok((first, parts))
 }
 
-/// The 23 counters of a world, in a fixed order (the order of [`WorldCounters`]' fields).
+/// The 25 counters of a world, in a fixed order (the order of [`WorldCounters`]' fields).
 macro_rules! counter_fields {
     ($m:ident) => {
         $m!(
@@ -348,6 +348,8 @@ macro_rules! counter_fields {
             cells_recomputed,
             cells_committed,
             cells_rolled_back,
+            cells_ahead,
+            cells_ahead_dropped,
             steps_reexecuted,
             rollbacks_primary,
             rollbacks_secondary,
@@ -368,8 +370,8 @@ macro_rules! counter_fields {
     };
 }
 
-/// Words per world in a counters payload: its id and its 23 counters.
-const COUNTER_WORDS: usize = 24;
+/// Words per world in a counters payload: its id and its 25 counters.
+const COUNTER_WORDS: usize = 26;
 
 /// Encodes worlds' counters (world id, counters).
 pub fn encode_counters<'a>(

@@ -17,6 +17,9 @@ pub struct ThreadTimes {
     pub rollback_seconds: f64,
     /// Of the busy time, seconds in actions computing forward.
     pub compute_seconds: f64,
+    /// Of the compute time, seconds computing a held-back world's interior ahead
+    /// ([`World::compute_interior_ahead`](crate::kernel::world::World::compute_interior_ahead)).
+    pub ahead_seconds: f64,
     /// Seconds inside GVT rounds (reading the published bounds).
     pub gvt_seconds: f64,
     /// Seconds with no task, or in turns that computed nothing.

@@ -28,6 +28,7 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
             self.idle[me].store(u64::from(task.is_none()));
             match task {
                 Some(w) => {
+                    let ahead_before = times.ahead_seconds;
                     let acted = self.run_world(w, me, &mut times);
                     if acted {
                         spins = 0;
@@ -42,7 +43,10 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
                             F::pause(spins);
                             spins = spins.saturating_add(1);
                         }
-                        times.idle_seconds += t0.elapsed().as_secs_f64();
+                        // Computing ahead in a held-back turn is busy time.
+                        let ahead = times.ahead_seconds - ahead_before;
+                        times.busy_seconds += ahead;
+                        times.idle_seconds += t0.elapsed().as_secs_f64() - ahead;
                     }
                     let g0 = Instant::now();
                     self.gvt_round();
@@ -69,6 +73,7 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         out.times.receive_seconds += times.receive_seconds;
         out.times.rollback_seconds += times.rollback_seconds;
         out.times.compute_seconds += times.compute_seconds;
+        out.times.ahead_seconds += times.ahead_seconds;
         out.times.gvt_seconds += times.gvt_seconds;
         out.times.idle_seconds += times.idle_seconds;
         out.times.actions += times.actions;
@@ -151,6 +156,27 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         self.contribute(&mut held, gvt);
         let ThreadedWorld { world, meter, .. } = &mut *held;
         if self.postpone(world) {
+            // Held back, the world computes ahead the cells no foreign view reaches: the
+            // wait for its neighbour is spent on work the advance then skips (SPEC.md §K5).
+            let a0 = Instant::now();
+            let c0 = thread_cpu_seconds();
+            match catch_unwind(AssertUnwindSafe(|| world.compute_interior_ahead(gvt))) {
+                Ok(0) => {}
+                Ok(_) => {
+                    let spent = a0.elapsed().as_secs_f64();
+                    meter.add_busy(thread_cpu_seconds() - c0);
+                    times.compute_seconds += spent;
+                    times.ahead_seconds += spent;
+                }
+                Err(p) => {
+                    self.fail(ExecError::WorldPanicked {
+                        world: w as WorldId,
+                        step: world.lvt(),
+                        message: panic_message(&*p),
+                    });
+                    return false;
+                }
+            }
             self.published[w].store(world.bound());
             // Still under the world's lock: a message that arrives after this is seen
             // waiting and wakes the world into the ready set.

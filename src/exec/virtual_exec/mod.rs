@@ -89,6 +89,8 @@ pub struct VirtualRun<M: CellModel> {
     in_flight: BTreeMap<Step, usize>,
     chooser: Chooser,
     record: bool,
+    /// Worlds compute their interior ahead after each action ([`VirtualOptions::compute_ahead`]).
+    compute_ahead: bool,
     decisions: Vec<u32>,
     turn: u64,
     gvt: Step,
@@ -157,6 +159,7 @@ impl<M: CellModel> VirtualRun<M> {
             in_flight: BTreeMap::new(),
             chooser: Chooser::new(&options.schedule),
             record: options.record_schedule,
+            compute_ahead: options.compute_ahead,
             decisions: Vec::new(),
             turn: 0,
             gvt: 1,
@@ -494,7 +497,15 @@ impl<M: CellModel> VirtualRun<M> {
             }
             let w = acts[i];
             let lvt = self.worlds[w].lvt();
-            let acted = catch_unwind(AssertUnwindSafe(|| self.changing(w).act(gvt)));
+            let ahead = self.compute_ahead;
+            let acted = catch_unwind(AssertUnwindSafe(|| {
+                let world = self.changing(w);
+                let msgs = world.act(gvt);
+                if ahead {
+                    world.compute_interior_ahead(gvt);
+                }
+                msgs
+            }));
             let msgs = match acted {
                 Ok(msgs) => msgs,
                 Err(p) => {

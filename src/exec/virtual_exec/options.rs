@@ -48,6 +48,12 @@ pub struct VirtualOptions {
     /// Record the decisions so the run can print a replay string
     /// (`VirtualRun::schedule_string`; costs four bytes per decision).
     pub record_schedule: bool,
+    /// After each action, let the world compute ahead the interior of its head step
+    /// (`World::compute_interior_ahead`, as the threaded executor does while a world is
+    /// held back), so that stragglers meet outputs computed ahead. Off by default; the
+    /// committed bits never depend on it.
+    #[serde(default)]
+    pub compute_ahead: bool,
 }
 
 impl Default for VirtualOptions {
@@ -63,6 +69,7 @@ impl VirtualOptions {
         VirtualOptions {
             schedule,
             record_schedule: true,
+            compute_ahead: false,
         }
     }
 
@@ -80,6 +87,12 @@ impl VirtualOptions {
     /// The same options with decision recording on or off.
     pub fn record_schedule(mut self, on: bool) -> Self {
         self.record_schedule = on;
+        self
+    }
+
+    /// The same options with computing ahead on or off ([`VirtualOptions::compute_ahead`]).
+    pub fn compute_ahead(mut self, on: bool) -> Self {
+        self.compute_ahead = on;
         self
     }
 }

@@ -20,6 +20,7 @@
 //! only a different output changes states at `t + 1` (early cut-off) and re-sends migrations.
 
 mod conservative;
+mod early;
 mod index;
 mod keys;
 mod log;
@@ -135,6 +136,9 @@ pub struct World<M: CellModel> {
     origin: Step,
     /// Ghosts to (re)evaluate at the end of the current action, as (step, own cell).
     ghost_due: BTreeSet<(Step, OwnCell)>,
+    /// The head step whose interior cells were computed ahead, if any
+    /// ([`World::compute_interior_ahead`]): their outputs are in the log.
+    early: Option<Step>,
     /// Cell mode with delta ghosts: its repair stopped at a step whose remaining dirty
     /// cells read a view a ghost announced to change (K5); it waits for news (cleared by
     /// [`World::receive`]).

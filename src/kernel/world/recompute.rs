@@ -285,6 +285,7 @@ impl<M: CellModel> World<M> {
     /// step `t` was computed, dirty the cells reading it. Returns whether something became
     /// dirty.
     pub(super) fn on_state_change(&mut self, d: u32, t: Step, old: Shared<M::State>) -> bool {
+        self.drop_ahead_reading(d, t);
         let x = self.own(d);
         self.ghost_due.insert((t, x));
         if self.delta() {
@@ -351,6 +352,38 @@ impl<M: CellModel> World<M> {
         }
     }
 
+    /// Prepares the states and views of step `h` for the cells computed at `h` (their hints
+    /// and rest flags, SPEC.md §K5).
+    pub(super) fn prepare(&mut self, h: Step) {
+        let i = self.si(h);
+        self.prepared.prepare(
+            &*self.model,
+            &self.slots[i],
+            self.cells.as_slice(),
+            &self.margin,
+            self.nbrs.as_slice(),
+            h,
+        );
+    }
+
+    /// The output of own cell `x` at the prepared step `h`: empty for an empty cell, its
+    /// state if its whole neighbourhood is at rest, else its computation.
+    pub(super) fn compute_or_keep(&mut self, x: OwnCell, h: Step) -> Out<M::State, M::Event> {
+        let i = self.si(h);
+        if self.slots[i].state(x).is_empty() {
+            Out::empty(self.cells[x])
+        } else if self.prepared.keeps(x, h) {
+            // The model's promise (`CellModel::at_rest`, SPEC.md §4.1 rule 7): the output
+            // is the cell's state, bit for bit, and no event. Counted as a computation,
+            // which it stands for.
+            self.counters.cells_computed += 1;
+            let state = self.slots[i].states[x].clone();
+            Out::new(self.cells[x], state, Vec::new(), Vec::new(), true)
+        } else {
+            self.compute(x, h)
+        }
+    }
+
     /// Computes step `head` → `head + 1` for every own cell (optimistic modes).
     pub(super) fn advance(&mut self, out: &mut Vec<Message<M::State>>) {
         let h = self.head;
@@ -362,27 +395,13 @@ impl<M: CellModel> World<M> {
         let mut landings: PerOwnCell<u32> = vec![0; n].into();
         let mut migs: BTreeSet<(OwnCell, WorldId)> = BTreeSet::new();
         // Every cell of step h reads the states of h: their hints and whether they are at
-        // rest are worked out once.
-        self.prepared.prepare(
-            &*self.model,
-            &self.slots[i],
-            self.cells.as_slice(),
-            &self.margin,
-            self.nbrs.as_slice(),
-            h,
-        );
+        // rest are worked out once (again if the interior was computed ahead: views may
+        // have changed since).
+        self.prepare(h);
         for x in OwnCell::all(n) {
-            let o = if self.slots[i].state(x).is_empty() {
-                Out::empty(self.cells[x])
-            } else if self.prepared.keeps(x, h) {
-                // The model's promise (`CellModel::at_rest`, SPEC.md §4.1 rule 7): the
-                // output is the cell's state, bit for bit, and no event. Counted as a
-                // computation, which it stands for.
-                self.counters.cells_computed += 1;
-                let state = self.slots[i].states[x].clone();
-                Out::new(self.cells[x], state, Vec::new(), Vec::new(), true)
-            } else {
-                self.compute(x, h)
+            let o = match self.take_ahead(x, h) {
+                Some(o) => o,
+                None => self.compute_or_keep(x, h),
             };
             if o.stays() {
                 landings[x] += u32::from(o.bodies.is_some());
@@ -404,6 +423,7 @@ impl<M: CellModel> World<M> {
         }
         // A straggler may change the states of h: a re-execution computes them afresh.
         self.prepared.clear();
+        self.early = None;
         // The state at h + 1 of a cell whose own output alone lands in it is that output (one
         // shared allocation, no copy). The other cells that something lands in, those that
         // also receive early migrations, and every cell when inputs apply at h + 1, take the

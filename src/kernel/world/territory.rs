@@ -120,6 +120,7 @@ impl<M: CellModel> World<M> {
             record: None,
             origin: step,
             ghost_due: BTreeSet::new(),
+            early: None,
             waiting: false,
         }
     }
