@@ -2,7 +2,9 @@
 //! (`TH_CUBES`, default 8000) for `TH_STEPS` steps (default 600 = 10 simulated seconds),
 //! the threaded executor on `TH_THREADS` threads (default 2) with each world count of
 //! `TH_WORLDS` (default "2,4,8"), each window of `TH_WINDOW` (default "16") and each
-//! laggard lead of `TH_LEAD` (default "0", `--lead` of `soda run`), `cell` mode;
+//! laggard lead of `TH_LEAD` (default "0", `--lead` of `soda run`) and each setting of
+//! `TH_AHEAD` (default "1": postponed worlds compute their interior ahead; "0,1" compares
+//! both), `cell` mode;
 //! `TH_REPS` (default 1) repetitions, each timing the reference again beside every case,
 //! then the median of each case's pair ratios. Prints wall
 //! times, the speed-up over the reference, efficiency, rollbacks and the threads' busy,
@@ -54,6 +56,10 @@ fn main() {
         .split(',')
         .map(|l| l.trim().parse().expect("TH_LEAD"))
         .collect();
+    let aheads: Vec<bool> = env("TH_AHEAD", "1", "1")
+        .split(',')
+        .map(|a| a.trim() == "1")
+        .collect();
     let worlds: Vec<usize> = env("TH_WORLDS", "2,4,8", "2,4")
         .split(',')
         .map(|w| w.trim().parse().expect("TH_WORLDS"))
@@ -91,13 +97,15 @@ fn main() {
         r1 / r2,
         tr / r1
     );
-    let cases: Vec<(usize, u64, u64)> = worlds
+    let cases: Vec<(usize, u64, u64, bool)> = worlds
         .iter()
         .flat_map(|&w| {
-            let leads = &leads;
-            windows
-                .iter()
-                .flat_map(move |&v| leads.iter().map(move |&l| (w, v, l)))
+            let (leads, aheads) = (&leads, &aheads);
+            windows.iter().flat_map(move |&v| {
+                leads
+                    .iter()
+                    .flat_map(move |&l| aheads.iter().map(move |&a| (w, v, l, a)))
+            })
         })
         .collect();
     // Each repetition times the reference again, then every case: the speed-up of a case is
@@ -108,11 +116,13 @@ fn main() {
         if rep > 0 {
             println!("  rep {}: reference {tr:.2} s", rep + 1);
         }
-        for (k, &(w, window, lead)) in cases.iter().enumerate() {
+        for (k, &(w, window, lead, ahead)) in cases.iter().enumerate() {
             let config = KernelConfig::new(w).mode(RollbackMode::Cell).window(window);
             let r = run_threaded_with::<_, StdFacade>(
                 ThreadedSetup::new(scene.model(), scene.grid(), scene.initial_bodies()),
-                &ThreadedOptions::new(&config, threads, steps).lead(lead),
+                &ThreadedOptions::new(&config, threads, steps)
+                    .lead(lead)
+                    .compute_ahead(ahead),
                 |_, _| {},
             )
             .expect("threaded run");
@@ -122,7 +132,7 @@ fn main() {
             let c = &r.counters.total;
             let tt = &r.times;
             println!(
-                "  {threads} threads, {w:2} worlds, cell W{window}, lead {lead}: {:.2} s = {:.2}x the reference's speed; efficiency {:.3}, rollbacks {} ({} steps), cells re-executed {}, messages {} + {} anti; thread time busy {:.2} s (ahead {:.2} s), gvt {:.2} s, idle {:.2} s, steals {}, moves {}",
+                "  {threads} threads, {w:2} worlds, cell W{window}, lead {lead}, ahead {ahead}: {:.2} s = {:.2}x the reference's speed; efficiency {:.3}, rollbacks {} ({} steps), cells re-executed {}, messages {} + {} anti; thread time busy {:.2} s (ahead {:.2} s), gvt {:.2} s, idle {:.2} s, steals {}, moves {}",
                 r.wall_seconds,
                 tr / r.wall_seconds,
                 c.efficiency(),
@@ -141,11 +151,11 @@ fn main() {
         }
     }
     if reps > 1 {
-        for (k, &(w, window, lead)) in cases.iter().enumerate() {
+        for (k, &(w, window, lead, ahead)) in cases.iter().enumerate() {
             let mut r = ratios[k].clone();
             r.sort_by(f64::total_cmp);
             println!(
-                "  median of {reps} pair ratios, {w} worlds, W{window}, lead {lead}: {:.2}x the reference's speed (runs: {})",
+                "  median of {reps} pair ratios, {w} worlds, W{window}, lead {lead}, ahead {ahead}: {:.2}x the reference's speed (runs: {})",
                 r[r.len() / 2],
                 r.iter().map(|x| format!("{x:.2}")).collect::<Vec<_>>().join(", ")
             );

@@ -23,6 +23,9 @@ pub struct ThreadedOptions<'a> {
     /// nearly in lockstep (few rollbacks); more lets a world speculate past a slower
     /// neighbour, up to the window. Pacing only: the committed bits never depend on it.
     pub lead: u64,
+    /// Whether a postponed world computes its interior ahead (SPEC.md §K5 item 4, §10; on
+    /// by default). Pacing only: the committed bits never depend on it.
+    pub compute_ahead: bool,
 }
 
 impl<'a> ThreadedOptions<'a> {
@@ -34,7 +37,15 @@ impl<'a> ThreadedOptions<'a> {
             steps,
             wanted: StatesWanted::none(),
             lead: 0,
+            compute_ahead: true,
         }
+    }
+
+    /// The same options with computing ahead on or off (see
+    /// [`ThreadedOptions::compute_ahead`]).
+    pub fn compute_ahead(mut self, on: bool) -> Self {
+        self.compute_ahead = on;
+        self
     }
 
     /// The same options with the laggard lead `lead` (see [`ThreadedOptions::lead`]).

@@ -40,6 +40,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         steps,
         ref wanted,
         lead,
+        compute_ahead,
     } = *options;
     let ThreadedSetup {
         model,
@@ -119,6 +120,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         target: F::Atomic::new(epoch_end),
         optimistic: config.mode != crate::kernel::RollbackMode::Conservative,
         lead,
+        compute_ahead,
         assembly: F::Mutex::new(Assembly {
             partial: BTreeMap::new(),
             next: 1,

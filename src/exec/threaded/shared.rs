@@ -97,6 +97,9 @@ pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     /// lets laggards run first (optimistic modes;
     /// [`ThreadedOptions::lead`](super::ThreadedOptions::lead)).
     pub(super) lead: Step,
+    /// Whether a postponed world computes its interior ahead
+    /// ([`ThreadedOptions::compute_ahead`](super::ThreadedOptions::compute_ahead)).
+    pub(super) compute_ahead: bool,
     /// Committed steps being assembled from the worlds' contributions.
     pub(super) assembly: F::Mutex<Assembly<M>>,
     /// Whole committed steps waiting for the output stage, and the run's statistics.

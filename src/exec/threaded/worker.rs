@@ -160,7 +160,14 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
             // wait for its neighbour is spent on work the advance then skips (SPEC.md §K5).
             let a0 = Instant::now();
             let c0 = thread_cpu_seconds();
-            match catch_unwind(AssertUnwindSafe(|| world.compute_interior_ahead(gvt))) {
+            let ahead = || {
+                if self.compute_ahead {
+                    world.compute_interior_ahead(gvt)
+                } else {
+                    0
+                }
+            };
+            match catch_unwind(AssertUnwindSafe(ahead)) {
                 Ok(0) => {}
                 Ok(_) => {
                     let spent = a0.elapsed().as_secs_f64();
