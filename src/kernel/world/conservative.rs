@@ -35,7 +35,7 @@ impl<M: CellModel> World<M> {
                     slot.ghost_known.insert(src);
                     if !msg.bodies.is_empty() {
                         let m = self.margin_cell(src);
-                        self.slots[i].ghosts[m.index()] = Self::ghost_view(msg);
+                        self.slots[i].ghosts[m] = Self::ghost_view(msg);
                     } else {
                         // An empty cell at `step` migrates nothing at `step + 1`.
                         self.ensure_slot(step + 1);

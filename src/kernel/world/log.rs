@@ -2,6 +2,7 @@
 //! views of the margin cells, the migrations in, the inputs, and the messages received and
 //! sent (SPEC.md §K3); reading committed steps and fossil collection.
 
+use super::chunked::Chunked;
 use super::index::{MarginCell, OwnCell, PerOwnCell};
 use super::keys::{MigrationIn, RecvKey, SentKey};
 use super::territory::Nb;
@@ -95,6 +96,16 @@ impl<S, E> Out<S, E> {
                 + r.homes.len() * 4
                 + r.events.len() * std::mem::size_of::<Event<E>>()
         })
+    }
+
+    /// Whether it is `other` allocation for allocation: the same cell, computed alike, the
+    /// same bodies' allocation, and neither has home cells or events.
+    pub(super) fn same_allocation(&self, other: &Self) -> bool {
+        self.cell == other.cell
+            && self.computed == other.computed
+            && self.rare.is_none()
+            && other.rare.is_none()
+            && same_allocation(&self.bodies, &other.bodies)
     }
 
     /// Whether it homes no body and raised no event.
@@ -207,17 +218,19 @@ pub(super) enum Live<S> {
 /// Everything a world holds about one step.
 #[derive(Debug)]
 pub(super) struct Slot<S, E> {
-    /// The state of each own cell at this step.
-    pub(super) states: PerOwnCell<Shared<S>>,
-    /// The output of each own cell's computation at this step (`None`: not computed yet).
-    pub(super) outs: PerOwnCell<Option<Out<S, E>>>,
+    /// The state of each own cell at this step (chunks equal to the step before's are
+    /// shared with it).
+    pub(super) states: Chunked<OwnCell, Shared<S>>,
+    /// The output of each own cell's computation at this step (`None`: not computed yet;
+    /// chunks equal to the step before's are shared with it).
+    pub(super) outs: Chunked<OwnCell, Option<Out<S, E>>>,
     /// Conservative mode: whether each own cell's state at this step is known (final).
     pub(super) known: PerOwnCell<bool>,
     /// The view of each margin cell (indexed by [`MarginCell`]) at this step (K4: the
     /// effective ghost of the step, else — optimistic modes — the view of the step before;
     /// `None`: empty). Shared, not copied, between the steps that inherit it, and (within a
-    /// process) with the sender's log.
-    pub(super) ghosts: Vec<Shared<S>>,
+    /// process) with the sender's log; chunk by chunk with the step before's.
+    pub(super) ghosts: Chunked<MarginCell, Shared<S>>,
     /// Conservative mode: the foreign cells (global) whose ghost of this step has arrived.
     pub(super) ghost_known: BTreeSet<u32>,
     /// The bodies migrating in at this step, by own destination cell and foreign source
@@ -265,7 +278,7 @@ impl<S: Clone, E: Clone> Slot<S, E> {
 
     /// The view of margin cell `m` (empty if none).
     pub(super) fn ghost(&self, m: MarginCell) -> &[S] {
-        view(&self.ghosts[m.index()])
+        view(&self.ghosts[m])
     }
 
     /// The states it holds for neighbour `n`: an own cell's state, a margin cell's view,
@@ -281,10 +294,10 @@ impl<S: Clone, E: Clone> Slot<S, E> {
     /// An empty slot for `own` own cells and `margin` margin cells.
     pub(super) fn new(own: usize, margin: usize) -> Self {
         Slot {
-            states: vec![None; own].into(),
-            outs: (0..own).map(|_| None).collect(),
+            states: Chunked::new(own),
+            outs: Chunked::new(own),
             known: vec![false; own].into(),
-            ghosts: vec![None; margin],
+            ghosts: Chunked::new(margin),
             ghost_known: BTreeSet::new(),
             foreign_in: BTreeMap::new(),
             migrate_known: BTreeSet::new(),
@@ -302,21 +315,26 @@ impl<S: Clone, E: Clone> Slot<S, E> {
         let s = std::mem::size_of::<S>();
         let p = std::mem::size_of::<Homed<S>>();
         let v = std::mem::size_of::<Vec<S>>();
-        let h = std::mem::size_of::<Shared<S>>();
         let mut b = LogBytes {
-            slots: (self.states.len() * (h + std::mem::size_of::<Option<Out<S, E>>>() + 1)
-                + self.ghosts.len() * h
+            slots: (self.states.header_bytes()
+                + self.outs.header_bytes()
+                + self.known.len()
+                + self.ghosts.header_bytes()
                 + (self.ghost_known.len() + self.migrate_known.len()) * 8)
                 as u64,
             ..LogBytes::default()
         };
-        // Each holder of a shared allocation counts its share.
+        // Each holder of a shared allocation counts its share; an entry of a chunk shared
+        // by `n` slots is held once by all of them.
         let held = |a: &Arc<[S]>| (16 + a.len() * s) / Arc::strong_count(a);
-        b.states += self.states.iter().flatten().map(held).sum::<usize>() as u64;
-        for o in self.outs.iter().flatten() {
-            b.outputs += (o.bodies.as_ref().map_or(0, held) + o.rare_bytes()) as u64;
+        let per_chunk = |(e, n): (&Shared<S>, usize)| e.as_ref().map_or(0, held) / n;
+        b.states += self.states.iter_shared().map(per_chunk).sum::<usize>() as u64;
+        for (o, n) in self.outs.iter_shared() {
+            if let Some(o) = o {
+                b.outputs += ((o.bodies.as_ref().map_or(0, held) + o.rare_bytes()) / n) as u64;
+            }
         }
-        b.ghosts += self.ghosts.iter().flatten().map(held).sum::<usize>() as u64;
+        b.ghosts += self.ghosts.iter_shared().map(per_chunk).sum::<usize>() as u64;
         for input in self.inputs.values() {
             b.inputs +=
                 (8 + input.edits.len() * 16 + input.removes.len() * 8 + input.adds.len() * p)
@@ -436,16 +454,7 @@ impl<M: CellModel> World<M> {
         else {
             return false;
         };
-        prev.states.len() == cur.states.len()
-            && prev
-                .states
-                .iter()
-                .zip(cur.states.iter())
-                .all(|(a, b)| match (a, b) {
-                    (None, None) => true,
-                    (Some(a), Some(b)) => Arc::ptr_eq(a, b),
-                    _ => false,
-                })
+        prev.states.all_same(&cur.states, same_allocation)
     }
 
     /// Its slot of step `t`, if held.
@@ -541,5 +550,14 @@ impl<M: CellModel> World<M> {
             }
             self.slots.push_back(slot);
         }
+    }
+}
+
+/// Whether two shared states are the same allocation (or both empty).
+pub(super) fn same_allocation<S>(a: &Shared<S>, b: &Shared<S>) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+        _ => false,
     }
 }

@@ -19,6 +19,7 @@
 //! `t` — that is a rollback. Re-executing a dirty cell compares the new output with the log;
 //! only a different output changes states at `t + 1` (early cut-off) and re-sends migrations.
 
+mod chunked;
 mod conservative;
 mod early;
 mod index;

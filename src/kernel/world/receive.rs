@@ -119,7 +119,7 @@ impl<M: CellModel> World<M> {
                 Some(_) => unreachable!("a ghost's version carries a view"),
                 None if i > 0 && delta => {
                     let m = self.margin_cell(src);
-                    (self.slots[i - 1].ghosts[m.index()].clone(), false)
+                    (self.slots[i - 1].ghosts[m].clone(), false)
                 }
                 None => {
                     // Empty is the view before the origin; a delta ghost's step is always
@@ -230,7 +230,7 @@ impl<M: CellModel> World<M> {
             if u > t && (!carry || own_ghost()) {
                 break;
             }
-            let old = std::mem::replace(&mut slot.ghosts[m.index()], view.clone());
+            let old = std::mem::replace(&mut slot.ghosts[m], view.clone());
             let unchanged = match (&old, &view) {
                 (None, None) => true,
                 (Some(a), Some(b)) => Arc::ptr_eq(a, b) || Self::same_states(a, b),
@@ -264,7 +264,7 @@ impl<M: CellModel> World<M> {
             .filter(|&c| self.is_own(c))
             .collect();
         if step <= self.head {
-            for (x, st) in self.slots[i].states.enumerate() {
+            for (x, st) in OwnCell::all(self.cells.len()).zip(self.slots[i].states.iter()) {
                 let touched = |b: &M::State| {
                     let id = M::id(b);
                     msg.removes.contains(&id) || msg.edits.iter().any(|e| e.id == id)
