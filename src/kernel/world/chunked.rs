@@ -67,6 +67,20 @@ impl<K: Position, T: Clone + Default> Chunked<K, T> {
         }
     }
 
+    /// The entries of `values`, in position order (each chunk written once, owned alone).
+    pub(super) fn from_vec(values: Vec<T>) -> Self {
+        let len = values.len();
+        let mut it = values.into_iter();
+        let chunks = (0..len.div_ceil(CHUNK))
+            .map(|_| Arc::new(std::array::from_fn(|_| it.next().unwrap_or_default())))
+            .collect();
+        Chunked {
+            chunks,
+            len,
+            key: std::marker::PhantomData,
+        }
+    }
+
     /// The entries in position order.
     pub(super) fn iter(&self) -> impl Iterator<Item = &T> + '_ {
         self.chunks.iter().flat_map(|c| c.iter()).take(self.len)
@@ -156,6 +170,8 @@ mod tests {
         assert_eq!(a[own(33)], Some(33));
         assert_eq!(b[own(33)], Some(1000));
         assert_eq!(b.iter().count(), 70);
+        let c: Chunked<OwnCell, Option<u32>> = Chunked::from_vec((0..70).map(Some).collect());
+        assert!(a.all_same(&c, |x, y| x == y));
         assert!(!a.all_same(&b, |x, y| x == y));
         // Chunks 0 and 2 are still shared, chunk 1 is not.
         let shared: Vec<usize> = b.iter_shared().map(|(_, n)| n).collect();

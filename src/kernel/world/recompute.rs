@@ -2,6 +2,7 @@
 //! from outputs and migrations, marking the cells that read a changed state dirty, and
 //! Rollback-and-Propagate's re-execution with early cut-off (SPEC.md §K4, §K5).
 
+use super::chunked::Chunked;
 use super::index::{cells_around, OwnCell, PerOwnCell};
 use super::keys::MigrationIn;
 use super::log::{same_allocation, share, view, Out, Shared};
@@ -398,6 +399,8 @@ impl<M: CellModel> World<M> {
         // rest are worked out once (again if the interior was computed ahead: views may
         // have changed since).
         self.prepare(h);
+        // The outputs, written into the slot at once (no copy-on-write per cell).
+        let mut outs = Vec::with_capacity(n);
         for x in OwnCell::all(n) {
             let o = match self.take_ahead(x, h) {
                 Some(o) => o,
@@ -419,8 +422,9 @@ impl<M: CellModel> World<M> {
                     }
                 }
             }
-            self.slots[i].outs[x] = Some(o);
+            outs.push(Some(o));
         }
+        self.slots[i].outs = Chunked::from_vec(outs);
         // A straggler may change the states of h: a re-execution computes them afresh.
         self.prepared.clear();
         self.early = None;
@@ -445,6 +449,11 @@ impl<M: CellModel> World<M> {
         // Inputs at h + 1 (rare) may remove ids from any cell: every cell takes the general
         // rule then.
         let inputs = !next.inputs.is_empty();
+        debug_assert!(
+            next.states.iter().all(Option::is_none),
+            "h + 1 is not built yet"
+        );
+        let mut states: Vec<Shared<M::State>> = vec![None; n];
         for (x, &k) in landings.enumerate() {
             if k == 0 {
                 continue;
@@ -457,12 +466,12 @@ impl<M: CellModel> World<M> {
                 general.insert(self.cells[x]);
                 continue;
             }
-            debug_assert!(self.slots[i + 1].states[x].is_none());
             let bodies = self.slots[i].outs[x]
                 .as_ref()
                 .and_then(|o| o.bodies.clone());
-            self.slots[i + 1].states[x] = bodies;
+            states[x.index()] = bodies;
         }
+        self.slots[i + 1].states = Chunked::from_vec(states);
         for d in general {
             self.rebuild_state(d, h + 1);
         }
