@@ -16,11 +16,13 @@ impl StateHash {
     const PRIME: u64 = 0x0000_0100_0000_01b3;
 
     /// A fresh hasher.
+    #[inline]
     pub fn new() -> Self {
         StateHash(Self::OFFSET)
     }
 
     /// Feeds raw bytes.
+    #[inline]
     pub fn bytes(&mut self, bytes: &[u8]) {
         for &b in bytes {
             self.0 ^= b as u64;
@@ -29,21 +31,25 @@ impl StateHash {
     }
 
     /// Feeds a `u64` (little-endian).
+    #[inline]
     pub fn u64(&mut self, v: u64) {
         self.bytes(&v.to_le_bytes());
     }
 
     /// Feeds a `u32` (little-endian).
+    #[inline]
     pub fn u32(&mut self, v: u32) {
         self.bytes(&v.to_le_bytes());
     }
 
     /// Feeds the bit pattern of an `f32`.
+    #[inline]
     pub fn f32(&mut self, v: f32) {
         self.u32(v.to_bits());
     }
 
     /// The hash value so far.
+    #[inline]
     pub fn finish(&self) -> u64 {
         self.0
     }

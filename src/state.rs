@@ -157,10 +157,24 @@ impl<S: Clone> CellStates<S> {
     fn targets<M: CellModel<State = S>>(
         grid: &Grid,
         entities: &mut Vec<S>,
+        starts: Vec<u32>,
+        target: &mut Vec<u32>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+    ) -> Vec<u32> {
+        Self::targets_visiting::<M>(grid, entities, starts, target, step, events, |_, _, _| {})
+    }
+
+    /// [`CellStates::targets`], calling `visit(k, entity, cell)` for each remaining entity
+    /// in the order given, `k` its index among them and `cell` its cell (linear index).
+    fn targets_visiting<M: CellModel<State = S>>(
+        grid: &Grid,
+        entities: &mut Vec<S>,
         mut starts: Vec<u32>,
         target: &mut Vec<u32>,
         step: Step,
         events: &mut Vec<Event<M::Event>>,
+        mut visit: impl FnMut(usize, &S, usize),
     ) -> Vec<u32> {
         u32::try_from(entities.len()).expect("more than u32::MAX entities");
         // Each entity's cell, then (below) its index in the result.
@@ -168,7 +182,9 @@ impl<S: Clone> CellStates<S> {
         target.reserve(entities.len());
         entities.retain(|s| match grid.cell_of(M::position(s)) {
             Some(c) => {
-                target.push(grid.index(c) as u32);
+                let cell = grid.index(c);
+                visit(target.len(), s, cell);
+                target.push(cell as u32);
                 true
             }
             None => {
@@ -241,53 +257,48 @@ impl<S: Clone> CellStates<S> {
         c: CellCoord,
         hints: &'a [Hint],
     ) -> Neighbourhood<'a, S> {
-        let mut cells: [&[S]; 27] = [&[]; 27];
-        let mut row_hints: [&[Hint]; 9] = [&[]; 9];
         let hinted = !hints.is_empty();
         debug_assert!(!hinted || hints.len() == self.entities.len());
+        let mut nb = Neighbourhood::new(c, [&[]; 27]);
         let [nx, ny, nz] = grid.dims;
-        // The x range of the neighbourhood inside the grid (empty for a centre far outside).
-        let (x0, x1) = ((c.x - 1).max(0), (c.x + 1).min(nx - 1));
-        if x0 > x1 {
-            return Neighbourhood {
-                centre: c,
-                cells,
-                hints: row_hints,
-            };
-        }
-        // Row by row along x (slot = 9·(dz + 1) + 3·(dy + 1) + dx + 1): a row's cells are
-        // consecutive in the grid's linear order, and so are their entities; one slice of
-        // the starts gives the row's cells.
-        let first_slot = (x0 - (c.x - 1)) as usize;
-        for dz in -1..=1 {
-            let z = c.z + dz;
-            if z < 0 || z >= nz {
+        // A row of slots (slot = 9·(dz + 1) + 3·(dy + 1) + dx + 1) holds the cells x − 1,
+        // x and x + 1 of one grid row: consecutive in the linear order, and so are their
+        // entities. Cell `x` of the row starting at linear index `r` spans
+        // `starts[r + x]..starts[r + x + 1]`; clamping the four bounds' x to `0..=nx`
+        // makes the cells outside the grid empty (a bound clamped to 0 equals the next,
+        // one clamped to `nx` the previous).
+        let xs = [c.x - 1, c.x, c.x + 1, c.x + 2].map(|x| x.clamp(0, nx) as usize);
+        for row in 0..9 {
+            let (y, z) = (c.y + row as i32 % 3 - 1, c.z + row as i32 / 3 - 1);
+            if y < 0 || y >= ny || z < 0 || z >= nz {
                 continue;
             }
-            for dy in -1..=1 {
-                let y = c.y + dy;
-                if y < 0 || y >= ny {
-                    continue;
-                }
-                let row = ((dz + 1) * 9 + (dy + 1) * 3) as usize + first_slot;
-                let first = grid.index(CellCoord::new(x0, y, z));
-                let starts = &self.starts[first..first + (x1 - x0) as usize + 2];
-                let (from, to) = (starts[0] as usize, starts[starts.len() - 1] as usize);
-                if hinted {
-                    row_hints[(row - first_slot) / 3] = &hints[from..to];
-                }
-                let mut entities = &self.entities[from..to];
-                for (k, w) in starts.windows(2).enumerate() {
-                    let (cell, more) = entities.split_at((w[1] - w[0]) as usize);
-                    cells[row + k] = cell;
-                    entities = more;
-                }
+            let r = (nx * (y + ny * z)) as usize;
+            let b = xs.map(|x| self.starts[r + x] as usize);
+            for (k, slot) in nb.cells[3 * row..3 * row + 3].iter_mut().enumerate() {
+                *slot = &self.entities[b[k]..b[k + 1]];
+            }
+            if hinted {
+                nb.hints[row] = &hints[b[0]..b[3]];
             }
         }
-        Neighbourhood {
-            centre: c,
-            cells,
-            hints: row_hints,
+        nb
+    }
+
+    /// A walk over the neighbourhoods of this state's cells in ascending linear order
+    /// ([`NeighbourhoodWalk::at`]), with hints from `hints` as
+    /// [`CellStates::neighbourhood_hinted`] takes them.
+    pub fn walk<'a>(&'a self, grid: &Grid, hints: &'a [Hint]) -> NeighbourhoodWalk<'a, S> {
+        debug_assert!(hints.is_empty() || hints.len() == self.entities.len());
+        NeighbourhoodWalk {
+            entities: &self.entities,
+            starts: &self.starts,
+            hints,
+            dims: grid.dims,
+            nb: Neighbourhood::new(CellCoord::new(0, 0, 0), [&[]; 27]),
+            at: None,
+            rows: [None; 9],
+            bounds: [[0; 4]; 9],
         }
     }
 
@@ -316,22 +327,26 @@ impl<S: Clone> CellStates<S> {
     /// Replaces the cells `computed` (linear indices, ascending) by `outputs`: the result
     /// is what [`CellStates::rebin`] gives for the entities of every other cell followed by
     /// `outputs` (each entity binned to the cell its position lies in, every cell sorted by
-    /// id, [`LeftGrid`] events for entities outside the grid). Returns an entity
-    /// vector to fill next, emptied, as `rebin` does.
+    /// id, [`LeftGrid`] events for entities outside the grid), with what
+    /// [`CellStates::rebin_derived`] derives from it. Returns an entity vector to fill
+    /// next, emptied, as `rebin` does, and the new state's hash.
     ///
     /// The kept entities are appended to `outputs` (its capacity reused, no new vector):
     /// a cell's entities have unique ids and end sorted by id, so the order they are given
     /// in changes no cell; only the order of the `LeftGrid` events can differ, and no kept
     /// entity raises one (it stays in its cell, inside the grid).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn replace_cells<M: CellModel<State = S>>(
         &mut self,
         grid: &Grid,
+        model: &M,
         computed: &[usize],
         mut outputs: Vec<S>,
         step: Step,
         events: &mut Vec<Event<M::Event>>,
         scratch: &mut Scratch,
-    ) -> Vec<S> {
+        derived: Derived<'_>,
+    ) -> (Vec<S>, u64) {
         let mut next_computed = computed.iter().copied().peekable();
         let mut from = 0usize;
         for i in 0..self.cell_count() {
@@ -342,7 +357,118 @@ impl<S: Clone> CellStates<S> {
             }
         }
         outputs.extend_from_slice(&self.entities[from..]);
-        self.rebin_with::<M>(grid, outputs, step, events, scratch)
+        self.rebin_derived(grid, model, outputs, step, events, scratch, derived)
+    }
+
+    /// [`CellStates::rebin_with`] (the same state, the same events) that also returns the
+    /// new state's hash ([`CellStates::hash`], the same value) and fills what `derived`
+    /// asks for, all in the passes binning makes anyway: each entity's id is read when its
+    /// cell is, its at-rest flag too, its hint when it is copied to its place, and the
+    /// hash's serial chain (FNV-1a, byte by byte) runs in the loop that copies the
+    /// entities, whose independent work the processor overlaps with it. Returns the
+    /// emptied vector `states` came in and the hash.
+    ///
+    /// # Panics
+    /// With more than `u32::MAX` entities.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn rebin_derived<M: CellModel<State = S>>(
+        &mut self,
+        grid: &Grid,
+        model: &M,
+        mut states: Vec<S>,
+        step: Step,
+        events: &mut Vec<Event<M::Event>>,
+        scratch: &mut Scratch,
+        derived: Derived<'_>,
+    ) -> (Vec<S>, u64) {
+        let Derived { hints, mut rest } = derived;
+        let Scratch {
+            target,
+            keys,
+            buffer,
+        } = scratch;
+        if let Some(rest) = rest.as_deref_mut() {
+            rest.clear();
+            rest.resize(grid.cell_count(), true);
+        }
+        keys.clear();
+        keys.reserve(states.len());
+        let starts = std::mem::take(&mut self.starts);
+        let starts = Self::targets_visiting::<M>(
+            grid,
+            &mut states,
+            starts,
+            target,
+            step,
+            events,
+            |k, s, cell| {
+                keys.push((M::id(s), k as u32));
+                if let Some(rest) = rest.as_deref_mut() {
+                    rest[cell] &= model.at_rest(s);
+                }
+            },
+        );
+        // Dense unique ids (every built-in scene's): the hash's order is the ids' alone,
+        // read from `states`; otherwise it is hashed the usual way once binned.
+        let dense = place_by_id(keys, buffer);
+        let n = states.len();
+        let mut into = std::mem::take(&mut self.entities);
+        into.truncate(n);
+        let short = n - into.len();
+        into.extend_from_slice(&states[..short]);
+        // Hints in the binned order, if the model gives one for every entity.
+        let mut hints = hints;
+        if let Some(h) = hints.as_deref_mut() {
+            h.clear();
+        }
+        let mut hints = hints.filter(|_| states.first().is_some_and(|s| model.hint(s).is_some()));
+        if let Some(h) = hints.as_deref_mut() {
+            h.resize(n, [0.0; 4]);
+        }
+        let mut every_hint = true;
+        let mut hash = StateHash::new();
+        for (k, (s, &t)) in states.iter().zip(target.iter()).enumerate() {
+            into[t as usize] = s.clone();
+            if let Some(h) = hints.as_deref_mut() {
+                match model.hint(s) {
+                    Some(hint) => h[t as usize] = hint,
+                    None => every_hint = false,
+                }
+            }
+            if dense {
+                let e = &states[keys[k].1 as usize];
+                hash.u64(M::id(e));
+                M::hash_state(e, &mut hash);
+            }
+        }
+        // Each cell sorted by id; the hints of a sorted cell follow its entities.
+        for w in starts.windows(2) {
+            let (a, b) = (w[0] as usize, w[1] as usize);
+            if b - a > 1 {
+                into[a..b].sort_by_key(|s| M::id(s));
+                if let Some(h) = hints.as_deref_mut() {
+                    for (h, s) in h[a..b].iter_mut().zip(&into[a..b]) {
+                        *h = model.hint(s).unwrap_or_default();
+                    }
+                }
+            }
+        }
+        if let Some(h) = hints {
+            if !every_hint {
+                h.clear();
+            }
+        }
+        *self = CellStates {
+            entities: into,
+            starts,
+        };
+        let hash = if dense {
+            hash.finish()
+        } else {
+            self.hash_with::<M>(scratch)
+        };
+        states.clear();
+        (states, hash)
     }
 
     /// Number of cells (the grid's).
@@ -385,6 +511,123 @@ impl<S: Clone> CellStates<S> {
         }
         canonical_hash::<M>(keys.iter().map(|&(_, i)| &self.entities[i as usize]))
     }
+}
+
+/// The neighbourhoods of a state's cells visited in ascending linear order
+/// ([`CellStates::walk`]): the same slices and hints as
+/// [`CellStates::neighbourhood_hinted`], from one neighbourhood kept and moved along x from
+/// each cell to the next one on the same grid row (its slots shifted, only the cells that
+/// come into view read from the cell starts), built anew on another row. Building each of
+/// a million neighbourhoods from scratch was a tenth of a step.
+pub struct NeighbourhoodWalk<'a, S> {
+    entities: &'a [S],
+    starts: &'a [u32],
+    hints: &'a [Hint],
+    dims: [i32; 3],
+    /// The neighbourhood of the last cell visited.
+    nb: Neighbourhood<'a, S>,
+    /// The linear index of the last cell visited.
+    at: Option<usize>,
+    /// Per row of slots, the linear index of its grid row's first cell (x = 0), `None`
+    /// for a row outside the grid (its slots and hints stay empty).
+    rows: [Option<usize>; 9],
+    /// Per row of slots inside the grid, where the cells x − 1, x and x + 1 begin and
+    /// where x + 1 ends in the entities (`starts` at x − 1 … x + 2, each x clamped to
+    /// `0..=nx`: a cell outside the grid is empty).
+    bounds: [[usize; 4]; 9],
+}
+
+impl<'a, S> NeighbourhoodWalk<'a, S> {
+    /// The neighbourhood of the cell with linear index `i`. Any cell may be asked for;
+    /// asking in ascending order, along rows, is what makes it cheap.
+    ///
+    /// # Panics
+    /// If `i` is not a cell of the grid.
+    pub fn at(&mut self, i: usize) -> &Neighbourhood<'a, S> {
+        let [nx, ny, nz] = self.dims;
+        let (starts, entities) = (self.starts, self.entities);
+        let clamped = |x: i32| x.clamp(0, nx) as usize;
+        let along = match self.at {
+            Some(p) if i > p && i - p < (nx - self.nb.centre.x) as usize => Some(i - p),
+            _ => None,
+        };
+        self.at = Some(i);
+        if let Some(d) = along {
+            // The same grid row: the same rows of slots inside the grid, moved by `d`.
+            let x = self.nb.centre.x + d as i32;
+            self.nb.centre.x = x;
+            for row in 0..9 {
+                let Some(r) = self.rows[row] else {
+                    continue;
+                };
+                let b = &mut self.bounds[row];
+                let cells = &mut self.nb.cells[3 * row..3 * row + 3];
+                match d {
+                    1 => {
+                        *b = [b[1], b[2], b[3], starts[r + clamped(x + 2)] as usize];
+                        cells[0] = cells[1];
+                        cells[1] = cells[2];
+                        cells[2] = &entities[b[2]..b[3]];
+                    }
+                    2 => {
+                        let (b2, b3) = (starts[r + clamped(x + 1)], starts[r + clamped(x + 2)]);
+                        *b = [b[2], b[3], b2 as usize, b3 as usize];
+                        cells[0] = cells[2];
+                        cells[1] = &entities[b[1]..b[2]];
+                        cells[2] = &entities[b[2]..b[3]];
+                    }
+                    _ => {
+                        *b = [x - 1, x, x + 1, x + 2].map(|x| starts[r + clamped(x)] as usize);
+                        for (k, cell) in cells.iter_mut().enumerate() {
+                            *cell = &entities[b[k]..b[k + 1]];
+                        }
+                    }
+                }
+                if !self.hints.is_empty() {
+                    self.nb.hints[row] = &self.hints[b[0]..b[3]];
+                }
+            }
+            return &self.nb;
+        }
+        let i32_index = i32::try_from(i).ok().filter(|&i| i < nx * ny * nz);
+        let i = i32_index.unwrap_or_else(|| panic!("cell {i} is not in the grid"));
+        let c = CellCoord::new(i % nx, (i / nx) % ny, i / (nx * ny));
+        self.nb.centre = c;
+        for row in 0..9 {
+            let (y, z) = (c.y + row as i32 % 3 - 1, c.z + row as i32 / 3 - 1);
+            let cells = &mut self.nb.cells[3 * row..3 * row + 3];
+            if y < 0 || y >= ny || z < 0 || z >= nz {
+                self.rows[row] = None;
+                cells.fill(&[]);
+                self.nb.hints[row] = &[];
+                continue;
+            }
+            let r = (nx * (y + ny * z)) as usize;
+            self.rows[row] = Some(r);
+            let b = [c.x - 1, c.x, c.x + 1, c.x + 2].map(|x| starts[r + clamped(x)] as usize);
+            self.bounds[row] = b;
+            for (k, cell) in cells.iter_mut().enumerate() {
+                *cell = &entities[b[k]..b[k + 1]];
+            }
+            self.nb.hints[row] = if self.hints.is_empty() {
+                &[]
+            } else {
+                &self.hints[b[0]..b[3]]
+            };
+        }
+        &self.nb
+    }
+}
+
+/// What [`CellStates::rebin_derived`] computes from the new state besides binning it.
+#[derive(Default)]
+pub(crate) struct Derived<'a> {
+    /// Set to the model's hint of every entity, in the state's order
+    /// ([`CellStates::hints`], the same values), or emptied if the model gives none.
+    pub hints: Option<&'a mut Vec<Hint>>,
+    /// Set to each cell's at-rest flag: whether every entity of the cell is at rest
+    /// ([`CellModel::at_rest`]; an empty cell is).
+    pub rest: Option<&'a mut Vec<bool>>,
 }
 
 /// Working memory a run keeps from step to step for binning ([`CellStates::rebin_with`])
@@ -609,6 +852,72 @@ mod tests {
                     for (k, cell) in nb.cells.iter().enumerate() {
                         let at = centre.offset(crate::model::Neighbourhood::<Body>::offset(k));
                         assert_eq!(*cell, state.cell(&grid, at), "slot {k} of {centre:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_walk_gives_the_neighbourhoods_of_its_cells_hints_included() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for (size, n) in [
+            ([1.0, 1.0, 1.0], 3),
+            ([2.0, 1.0, 3.0], 10),
+            ([7.0, 3.0, 4.0], 60),
+            ([9.0, 5.0, 2.0], 400),
+        ] {
+            let grid = Grid::covering(Vec3::zeros(), Vec3::new(size[0], size[1], size[2]), 1.0);
+            let bodies: Vec<Body> = (0..n)
+                .map(|id| {
+                    let p = Vec3::new(
+                        rng.random_range(0.0..size[0]),
+                        rng.random_range(0.0..size[1]),
+                        rng.random_range(0.0..size[2]),
+                    );
+                    Body::new(
+                        id,
+                        Shape::Ball { radius: 0.1 },
+                        Material::default(),
+                        p,
+                        Quat::identity(),
+                    )
+                })
+                .collect();
+            let state = CellStates::binned::<RigidBodyModel>(&grid, bodies, 0, &mut Vec::new());
+            let hints: Vec<crate::model::Hint> = (0..state.len()).map(|k| [k as f32; 4]).collect();
+            // Every cell; every cell with a chance of 1/2, 1/4 (gaps of every length along
+            // a row and across rows); the occupied cells.
+            let mut walks: Vec<Vec<usize>> = [1.0, 0.5, 0.25]
+                .iter()
+                .map(|&p| {
+                    (0..grid.cell_count())
+                        .filter(|_| rng.random_bool(p))
+                        .collect()
+                })
+                .collect();
+            walks.push(state.occupied().collect());
+            for cells in &walks {
+                for hints in [&hints[..], &[]] {
+                    let mut walk = state.walk(&grid, hints);
+                    for &i in cells {
+                        let c = grid.coord(i);
+                        let expected = state.neighbourhood_hinted(&grid, c, hints);
+                        let nb = walk.at(i);
+                        assert_eq!(nb.centre, c);
+                        for k in 0..27 {
+                            assert_eq!(nb.cells[k], expected.cells[k], "slot {k} of {c:?}");
+                            if !expected.cells[k].is_empty() {
+                                assert_eq!(nb.cells[k].as_ptr(), expected.cells[k].as_ptr());
+                            }
+                        }
+                        assert_eq!(nb.hints, expected.hints, "hints of {c:?}");
+                        for r in 0..9 {
+                            assert_eq!(nb.row_hints(r), expected.row_hints(r));
+                            if !expected.hints[r].is_empty() {
+                                assert_eq!(nb.hints[r].as_ptr(), expected.hints[r].as_ptr());
+                            }
+                        }
                     }
                 }
             }

@@ -11,7 +11,7 @@ use crate::frame::{Event, Frame};
 use crate::grid::Grid;
 use crate::kernel::Input;
 use crate::model::{BodyId, CellModel, Hint, Neighbourhood, Step};
-use crate::state::{CellStates, Scratch};
+use crate::state::{CellStates, Derived, Scratch};
 use std::collections::{BTreeMap, BTreeSet};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
@@ -37,8 +37,10 @@ pub struct ReferenceRun<M: CellModel> {
     hash: u64,
     /// Working memory of the binning and the hash, kept from step to step.
     scratch: Scratch,
-    /// The model's hints of the current state's entities ([`CellStates::hints`]) while a
-    /// step is computed, if it computes most of them; else empty. Kept for its capacity.
+    /// The model's hints of the current state's entities ([`CellStates::hints`]), or empty:
+    /// filled while a step that computed most entities bins the next state (the next step
+    /// then likely computes most of them too), else when a step computing most of them
+    /// starts. Kept for its capacity.
     hints: Vec<Hint>,
 }
 
@@ -236,22 +238,26 @@ impl<M: CellModel> ReferenceRun<M> {
         // Hints once per entity when most entities are in a computed cell (each is read by
         // every computed neighbourhood that holds it); none when few are (a pile mostly
         // at rest costs nothing per entity at rest). The outputs are the same either way.
+        // They are computed while the previous step binned this state when that step
+        // computed most entities too (`self.hints` is empty or this state's hints).
         let computed: usize = cells.iter().map(|&i| self.state.cell_at(i).len()).sum();
-        if computed * 2 >= self.state.len() {
+        let hinted = computed * 2 >= self.state.len();
+        if hinted && self.hints.is_empty() {
             self.state.hints(&self.model, &mut self.hints);
-        } else {
-            self.hints.clear();
         }
+        let hints: &[Hint] = if hinted { &self.hints } else { &[] };
         let mut events = Vec::new();
         let mut firsts: Vec<CellResult<M>> = Vec::new();
+        // One neighbourhood, moved from cell to cell.
+        let mut walk = self.state.walk(&self.grid, hints);
         for &i in &cells {
-            let c = self.grid.coord(i);
-            let nb = self.state.neighbourhood_hinted(&self.grid, c, &self.hints);
+            let nb = walk.at(i);
+            let c = nb.centre;
             let t0 = self.costs.is_some().then(std::time::Instant::now);
             let (start, first_event) = (next.len(), events.len());
             let (model, grid, step) = (&self.model, &self.grid, self.step);
             catch_unwind(AssertUnwindSafe(|| {
-                model.step_cell(step, grid, &nb, &mut next, &mut events)
+                model.step_cell(step, grid, nb, &mut next, &mut events)
             }))
             .map_err(|p| ExecError::CellPanicked {
                 step,
@@ -298,18 +304,26 @@ impl<M: CellModel> ReferenceRun<M> {
             })??;
         }
         let unchanged = !whole && cells.is_empty();
+        if !unchanged && !hinted {
+            self.hints.clear();
+        }
         if whole {
             if let Some(inputs) = self.inputs.remove(&step) {
                 next = apply_inputs::<M>(&self.grid, step, next, &inputs)?;
             }
-            self.spare = self.state.rebin_with::<M>(
+            let derived = Derived {
+                hints: hinted.then_some(&mut self.hints),
+                rest: Some(&mut self.rest),
+            };
+            (self.spare, self.hash) = self.state.rebin_derived(
                 &self.grid,
+                &self.model,
                 next,
                 self.step,
                 &mut events,
                 &mut self.scratch,
+                derived,
             );
-            self.update_rest(None);
             if self.check {
                 contract::check_unique_ids::<M>(&self.grid, &self.state, step)?;
             }
@@ -317,8 +331,8 @@ impl<M: CellModel> ReferenceRun<M> {
             // The computed cells are replaced by what lands in them; every other cell keeps
             // its state, which is its own output (the promise of `at_rest`), unless an output
             // of a computed neighbour lands in it.
-            // With most cells computed, every cell's flag is recomputed (the same flags,
-            // without sorting the touched cells).
+            // With most cells computed, every cell's flag is recomputed while binning (the
+            // same flags, without sorting the touched cells).
             let touched = (cells.len() * 4 < self.rest.len()).then(|| {
                 let mut touched = cells.clone();
                 touched.extend(
@@ -330,21 +344,26 @@ impl<M: CellModel> ReferenceRun<M> {
                 touched.dedup();
                 touched
             });
-            self.spare = self.state.replace_cells::<M>(
+            let derived = Derived {
+                hints: hinted.then_some(&mut self.hints),
+                rest: touched.is_none().then_some(&mut self.rest),
+            };
+            (self.spare, self.hash) = self.state.replace_cells(
                 &self.grid,
+                &self.model,
                 &cells,
                 next,
                 self.step,
                 &mut events,
                 &mut self.scratch,
+                derived,
             );
-            self.update_rest(touched.as_deref());
+            if touched.is_some() {
+                self.update_rest(touched.as_deref());
+            }
         }
         // With no cell computed and no input, the state is the previous one, bit for bit,
-        // and so is its hash.
-        if !unchanged {
-            self.hash = self.state.hash_with::<M>(&mut self.scratch);
-        }
+        // and so is its hash (and its hints).
         events.sort();
         self.step = step;
         Ok(Frame {

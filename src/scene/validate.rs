@@ -276,9 +276,9 @@ fn check_overlaps(scene: &Scene, grid: &Grid, c: &Checker) -> Result<(), SceneEr
     }
     let mut events = Vec::new();
     let state = CellStates::binned::<RigidBodyModel>(grid, bodies, 0, &mut events);
+    let mut walk = state.walk(grid, &[]);
     for i in state.occupied() {
-        let cell = grid.coord(i);
-        let nb = state.neighbourhood(grid, cell);
+        let nb = walk.at(i);
         for a in nb.own() {
             for b in nb.iter().filter(|b| b.id > a.id) {
                 let p = pair_penetration(a, b);

@@ -63,8 +63,9 @@ pub fn measure_state(
     for b in &sorted {
         pen = pen.max(environment_penetration(b, &model.environment));
     }
+    let mut walk = state.walk(grid, &[]);
     for i in state.occupied() {
-        let nb = state.neighbourhood(grid, grid.coord(i));
+        let nb = walk.at(i);
         for a in nb.own() {
             for b in nb.iter().filter(|b| b.id > a.id) {
                 pen = pen.max(pair_penetration(a, b));
