@@ -123,7 +123,7 @@ fn scripted_inputs_commit_like_the_reference_applying_them() {
                     PartitionKind::Blocks
                 })
                 .partition_seed(seed);
-            let options = VirtualOptions::seeded(seed);
+            let options = VirtualOptions::seeded(seed).compute_ahead(seed % 2 == 1);
             let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg, &options);
             for (t, i) in &inputs {
                 run.add_input(*t, i.clone());
@@ -145,7 +145,7 @@ fn inputs_injected_during_the_run_are_stragglers_that_roll_back_and_commit_corre
                 .window(8)
                 .partition(PartitionKind::Random)
                 .partition_seed(seed);
-            let options = VirtualOptions::seeded(seed);
+            let options = VirtualOptions::seeded(seed).compute_ahead(seed % 2 == 1);
             let (mut run, _) = VirtualRun::new(m.clone(), g.clone(), b.clone(), &cfg, &options);
             run.set_horizon(30);
             let mut got: Vec<(u64, usize)> =

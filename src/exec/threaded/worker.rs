@@ -158,30 +158,25 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         if self.postpone(world) {
             // Held back, the world computes ahead the cells no foreign view reaches: the
             // wait for its neighbour is spent on work the advance then skips (SPEC.md §K5).
-            let a0 = Instant::now();
-            let c0 = thread_cpu_seconds();
-            let ahead = || {
-                if self.compute_ahead {
-                    world.compute_interior_ahead(gvt)
-                } else {
-                    0
-                }
-            };
-            match catch_unwind(AssertUnwindSafe(ahead)) {
-                Ok(0) => {}
-                Ok(_) => {
-                    let spent = a0.elapsed().as_secs_f64();
-                    meter.add_busy(thread_cpu_seconds() - c0);
-                    times.compute_seconds += spent;
-                    times.ahead_seconds += spent;
-                }
-                Err(p) => {
-                    self.fail(ExecError::WorldPanicked {
-                        world: w as WorldId,
-                        step: world.lvt(),
-                        message: panic_message(&*p),
-                    });
-                    return false;
+            if self.compute_ahead && !world.interior_computed_ahead() {
+                let a0 = Instant::now();
+                let c0 = thread_cpu_seconds();
+                match catch_unwind(AssertUnwindSafe(|| world.compute_interior_ahead(gvt))) {
+                    Ok(0) => {}
+                    Ok(_) => {
+                        let spent = a0.elapsed().as_secs_f64();
+                        meter.add_busy(thread_cpu_seconds() - c0);
+                        times.compute_seconds += spent;
+                        times.ahead_seconds += spent;
+                    }
+                    Err(p) => {
+                        self.fail(ExecError::WorldPanicked {
+                            world: w as WorldId,
+                            step: world.lvt(),
+                            message: panic_message(&*p),
+                        });
+                        return false;
+                    }
                 }
             }
             self.published[w].store(world.bound());

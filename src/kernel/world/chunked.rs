@@ -136,7 +136,7 @@ impl<K: Position, T> Index<K> for Chunked<K, T> {
 
     fn index(&self, key: K) -> &T {
         let p = key.position();
-        debug_assert!(p < self.len);
+        assert!(p < self.len, "position {p} out of {} entries", self.len);
         &self.chunks[p / CHUNK][p % CHUNK]
     }
 }
@@ -145,7 +145,7 @@ impl<K: Position, T: Clone> IndexMut<K> for Chunked<K, T> {
     /// The entry, its chunk first copied if another slot shares it.
     fn index_mut(&mut self, key: K) -> &mut T {
         let p = key.position();
-        debug_assert!(p < self.len);
+        assert!(p < self.len, "position {p} out of {} entries", self.len);
         &mut Arc::make_mut(&mut self.chunks[p / CHUNK])[p % CHUNK]
     }
 }

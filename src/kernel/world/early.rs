@@ -21,6 +21,10 @@ impl<M: CellModel> World<M> {
     /// computed (or kept at rest), which count as computations (K9).
     pub fn compute_interior_ahead(&mut self, gvt: Step) -> u64 {
         let h = self.head;
+        // The adaptive window as an action at this GVT would see it (idempotent per GVT).
+        if let Some(t) = &mut self.throttle {
+            self.window = t.on_gvt(gvt, self.window, &self.counters);
+        }
         let able = self.mode != RollbackMode::Conservative
             && self.inbox.is_empty()
             && self.dirty.is_empty()
@@ -53,6 +57,12 @@ impl<M: CellModel> World<M> {
         done
     }
 
+    /// Whether the interior of its head step was computed ahead already (computing ahead
+    /// again does nothing until it advances).
+    pub fn interior_computed_ahead(&self) -> bool {
+        self.early == Some(self.head)
+    }
+
     /// The output of own cell `x` at the head step `h` if it was computed ahead (taken out
     /// of the log: the advance stores it back).
     pub(super) fn take_ahead(&mut self, x: OwnCell, h: Step) -> Option<Out<M::State, M::Event>> {
@@ -60,6 +70,8 @@ impl<M: CellModel> World<M> {
             return None;
         }
         let i = self.si(h);
+        // Read first: taking through a shared chunk would copy it.
+        self.slots[i].outs[x].as_ref()?;
         self.slots[i].outs[x].take()
     }
 
@@ -76,6 +88,9 @@ impl<M: CellModel> World<M> {
                 continue;
             }
             let x = self.own(n);
+            if self.slots[i].outs[x].is_none() {
+                continue;
+            }
             if let Some(o) = self.slots[i].outs[x].take() {
                 self.counters.cells_rolled_back += u64::from(o.computed);
                 self.counters.cells_ahead_dropped += 1;
