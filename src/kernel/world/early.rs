@@ -26,10 +26,8 @@ impl<M: CellModel> World<M> {
             self.window = t.on_gvt(gvt, self.window, &self.counters);
         }
         let able = self.mode != RollbackMode::Conservative
-            && self.inbox.is_empty()
-            && self.dirty.is_empty()
-            && h < self.end
-            && h + 1 < gvt + self.window;
+            && self.only_advances()
+            && self.may_advance(gvt);
         if !able || self.early == Some(h) {
             return 0;
         }
