@@ -758,6 +758,17 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
+    /// A ball of radius 0.1 with id `id` at `p`, at rest.
+    fn ball(id: u64, p: Vec3) -> Body {
+        Body::new(
+            id,
+            Shape::Ball { radius: 0.1 },
+            Material::default(),
+            p,
+            Quat::identity(),
+        )
+    }
+
     /// Binning as it was done with one vector per cell: push in the given order, then a
     /// stable sort by id per cell.
     fn binned_cell_by_cell(grid: &Grid, bodies: &[Body]) -> (Vec<Vec<Body>>, Vec<u64>) {
@@ -790,13 +801,7 @@ mod tests {
                         rng.random_range(-1.0f32..5.0),
                     );
                     let id = rng.random_range(0..ids);
-                    Body::new(
-                        id,
-                        Shape::Ball { radius: 0.1 },
-                        Material::default(),
-                        p,
-                        Quat::identity(),
-                    )
+                    ball(id, p)
                 })
                 .collect();
             let (cells, outside) = binned_cell_by_cell(&grid, &bodies);
@@ -833,13 +838,7 @@ mod tests {
             .map(|i| {
                 let c = grid.coord(i as usize);
                 let p = Vec3::new(c.x as f32 + 0.5, c.y as f32 + 0.5, c.z as f32 + 0.5);
-                Body::new(
-                    i,
-                    Shape::Ball { radius: 0.1 },
-                    Material::default(),
-                    p,
-                    Quat::identity(),
-                )
+                ball(i, p)
             })
             .collect();
         let state = CellStates::binned::<RigidBodyModel>(&grid, bodies, 0, &mut Vec::new());
@@ -875,13 +874,7 @@ mod tests {
                         rng.random_range(0.0..size[1]),
                         rng.random_range(0.0..size[2]),
                     );
-                    Body::new(
-                        id,
-                        Shape::Ball { radius: 0.1 },
-                        Material::default(),
-                        p,
-                        Quat::identity(),
-                    )
+                    ball(id, p)
                 })
                 .collect();
             let state = CellStates::binned::<RigidBodyModel>(&grid, bodies, 0, &mut Vec::new());
