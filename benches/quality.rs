@@ -20,6 +20,12 @@
 //! engines. Only stepping is timed. Energies are computed by the same code for both engines
 //! (SODA's `Body::kinetic_energy` on bodies rebuilt from Rapier's state).
 //!
+//! Then `settling-sweep` (benches/common/settling_sweep.rs): one settling scene is a lottery,
+//! so `QUALITY_SEEDS` (default 8) random mixed piles (150 balls and boxes, as the physics-law
+//! tests' piles) and ball gases under gravity (`gas-settling` with other seeds), 1,800 steps
+//! each: the largest rise of kinetic + potential energy after 5 s, and how many are still
+//! moving at 10 s and at 30 s, worst and median over the seeds, per engine.
+//!
 //! `cargo bench --bench quality` prints a markdown table (and writes target/quality.json);
 //! without `--bench` it runs a 20-step smoke version. `QUALITY_CASES=gas-settling,cube-pile`
 //! runs only those scenes, `QUALITY_ENGINES=soda` (or `rapier`) only that engine, and
@@ -36,11 +42,14 @@ mod knobs;
 mod rapier_world;
 
 use common::{measure_pile, Footprint, PileBody};
+#[path = "common/settling_sweep.rs"]
+mod settling_sweep;
 use rand::{Rng, SeedableRng};
 use rapier3d_new::math::Vector;
 use rapier3d_new::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyHandle};
 use rapier_world::insert_body;
 use serde::Serialize;
+use settling_sweep::{summary, SettlingRun, SettlingTrack};
 use soda::physics::{Body, Material, Shape};
 use soda::scene::builtin::builtin;
 use soda::scene::{BodySpec, Scene, SceneBuilder};
@@ -78,26 +87,37 @@ fn pile(s: &State) -> Vec<PileBody> {
     s.iter().map(PileBody::from_soda).collect()
 }
 
-/// Runs `scene` in SODA for `steps` steps: wall time, states at step 0 and at the end.
-fn run_soda(scene: &Scene, steps: u64) -> (f64, State, State) {
-    let mut sim = Simulation::new(scene.clone());
-    let first = scene.initial_bodies();
-    let start = Instant::now();
-    for _ in 0..steps {
-        sim.step();
-    }
-    let wall = start.elapsed().as_secs_f64();
-    let last = sim
-        .state()
+/// Called with the step number and the state after every step (outside the timed part's
+/// figures only in that the state is built for it).
+type Observer<'a> = Option<&'a mut dyn FnMut(u64, &State)>;
+
+fn soda_state(sim: &Simulation) -> State {
+    sim.state()
         .sorted::<RigidBodyModel>()
         .into_iter()
         .cloned()
-        .collect();
-    (wall, first, last)
+        .collect()
 }
 
-/// Runs `scene` in Rapier 0.36 for `steps` steps: wall time, states at step 0 and at the end.
-fn run_rapier(scene: &Scene, steps: u64) -> (f64, State, State) {
+/// Runs `scene` in SODA for `steps` steps: wall time, states at step 0 and at the end;
+/// `observe` sees the state after every step (its time is counted).
+fn run_soda(scene: &Scene, steps: u64, mut observe: Observer) -> (f64, State, State) {
+    let mut sim = Simulation::new(scene.clone());
+    let first = scene.initial_bodies();
+    let start = Instant::now();
+    for step in 1..=steps {
+        sim.step();
+        if let Some(f) = observe.as_mut() {
+            f(step, &soda_state(&sim));
+        }
+    }
+    let wall = start.elapsed().as_secs_f64();
+    (wall, first, soda_state(&sim))
+}
+
+/// Runs `scene` in Rapier 0.36 for `steps` steps: wall time, states at step 0 and at the end;
+/// `observe` as for [`run_soda`].
+fn run_rapier(scene: &Scene, steps: u64, mut observe: Observer) -> (f64, State, State) {
     let mut w = PhysicsWorld::new();
     w.gravity = Vector::new(scene.gravity[0], scene.gravity[1], scene.gravity[2]);
     w.integration_parameters.dt = scene.dt;
@@ -129,26 +149,33 @@ fn run_rapier(scene: &Scene, steps: u64) -> (f64, State, State) {
     }
     let first = scene.initial_bodies();
     let handles: Vec<RigidBodyHandle> = first.iter().map(|b| insert_body(&mut w, b)).collect();
+    let state = |w: &PhysicsWorld| -> State {
+        handles
+            .iter()
+            .zip(&first)
+            .map(|(&h, b)| {
+                let rb = &w.bodies[h];
+                let (t, q, lv, av) = (rb.translation(), *rb.rotation(), rb.linvel(), rb.angvel());
+                let mut s = b.clone();
+                s.position = soda::math::Vec3::new(t.x, t.y, t.z);
+                s.rotation = soda::math::Quat::from_quaternion(nalgebra::Quaternion::new(
+                    q.w, q.x, q.y, q.z,
+                ));
+                s.linvel = soda::math::Vec3::new(lv.x, lv.y, lv.z);
+                s.angvel = soda::math::Vec3::new(av.x, av.y, av.z);
+                s
+            })
+            .collect()
+    };
     let start = Instant::now();
-    for _ in 0..steps {
+    for step in 1..=steps {
         w.step();
+        if let Some(f) = observe.as_mut() {
+            f(step, &state(&w));
+        }
     }
     let wall = start.elapsed().as_secs_f64();
-    let last = handles
-        .iter()
-        .zip(&first)
-        .map(|(&h, b)| {
-            let rb = &w.bodies[h];
-            let (t, q, lv, av) = (rb.translation(), *rb.rotation(), rb.linvel(), rb.angvel());
-            let mut s = b.clone();
-            s.position = soda::math::Vec3::new(t.x, t.y, t.z);
-            s.rotation =
-                soda::math::Quat::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
-            s.linvel = soda::math::Vec3::new(lv.x, lv.y, lv.z);
-            s.angvel = soda::math::Vec3::new(av.x, av.y, av.z);
-            s
-        })
-        .collect();
+    let last = state(&w);
     (wall, first, last)
 }
 
@@ -159,7 +186,12 @@ fn random_velocity(rng: &mut rand_chacha::ChaCha8Rng, speed: f32) -> [f32; 3] {
 
 /// 512 balls of radius 0.3 m on a jittered lattice (1 m apart) in an 8 m box.
 fn ball_box(restitution: f32, friction: f32, gravity: bool) -> Scene {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(23);
+    ball_box_seeded(23, restitution, friction, gravity)
+}
+
+/// [`ball_box`] with the jitter and velocities drawn from `seed`.
+fn ball_box_seeded(seed: u64, restitution: f32, friction: f32, gravity: bool) -> Scene {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut b = SceneBuilder::new([0.0; 3], [8.0; 3])
         .walls(true, true)
         .environment_material(friction, restitution);
@@ -185,6 +217,94 @@ fn ball_box(restitution: f32, friction: f32, gravity: bool) -> Scene {
         });
     }
     b.build().expect("the ball box builds")
+}
+
+/// 150 balls and boxes of random sizes, materials and orientations dropped from a 6-layer
+/// lattice into a walled 4 m × 4 m box under gravity (as the physics-law tests' settling
+/// piles, `tests/physics_laws.rs`).
+fn mixed_pile(seed: u64) -> Scene {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut b = SceneBuilder::new([0.0; 3], [4.0, 8.0, 4.0])
+        .walls(true, false)
+        .environment_material(0.5, 0.3);
+    for k in 0..150u64 {
+        let c = [k % 5, k / 25, (k / 5) % 5].map(|c| c as f32);
+        let mut jitter = || rng.random_range(-0.015f32..0.015);
+        let position = [
+            0.4 + 0.8 * c[0] + jitter(),
+            0.5 + 0.8 * c[1],
+            0.4 + 0.8 * c[2] + jitter(),
+        ];
+        let shape = if rng.random_bool(0.5) {
+            Shape::Ball {
+                radius: rng.random_range(0.15f32..0.35),
+            }
+        } else {
+            Shape::Cuboid {
+                half_extents: [0, 1, 2].map(|_| rng.random_range(0.12f32..0.21)),
+            }
+        };
+        let material = Material {
+            density: rng.random_range(0.5f32..2.0),
+            friction: rng.random_range(0.2f32..0.8),
+            restitution: rng.random_range(0.0f32..0.6),
+        };
+        b = b.body_spec(BodySpec {
+            id: k,
+            shape,
+            material,
+            position,
+            rotation: [0, 1, 2].map(|_| rng.random_range(-3.0f32..3.0)),
+            velocity: [0, 1, 2].map(|_| rng.random_range(-1.0f32..1.0)),
+            angular_velocity: [0.0; 3],
+        });
+    }
+    b.build().expect("the mixed pile builds")
+}
+
+/// Settling over seeds (`settling-sweep`, [`settling_sweep`]): `seeds` mixed piles and ball
+/// gases under gravity, `steps` steps each, in each wanted engine. Returns the markdown rows.
+fn settling_sweep(seeds: u64, steps: u64, engines: &[(&str, &'static str)]) -> String {
+    type Run = fn(&Scene, u64, Observer) -> (f64, State, State);
+    type Build = fn(u64) -> Scene;
+    let gas: Build = |seed| ball_box_seeded(seed, 0.5, 0.5, true);
+    let kinds = [
+        ("mixed piles (150 balls and boxes)", mixed_pile as Build),
+        ("ball gas under gravity (512 balls)", gas),
+    ];
+    let mut table = String::from(
+        "| scenes | seeds | steps | engine | wall s (sum) | settling |\n|---|---:|---:|---|---:|---|\n",
+    );
+    for (kind, build) in kinds {
+        for &(key, engine) in engines {
+            let run: Run = if key == "soda" { run_soda } else { run_rapier };
+            let mut runs: Vec<SettlingRun> = Vec::new();
+            let mut wall_sum = 0.0;
+            for seed in 1..=seeds {
+                let scene = build(seed);
+                let ten_s = (10.0 / scene.dt).round() as u64;
+                let five_s = (5.0 / scene.dt).round() as u64;
+                let mut track = SettlingTrack::new(scene.gravity, five_s, ten_s);
+                let (wall, _, _) = run(
+                    &scene,
+                    steps,
+                    Some(&mut |step, state: &State| track.observe(step, state)),
+                );
+                wall_sum += wall;
+                let r = track.finish();
+                eprintln!(
+                    "quality: settling-sweep {kind} seed {seed} {engine}: rise {:.5} J, kinetic {:.2e} J at 10 s, {:.2e} J at the end",
+                    r.rise, r.kinetic_10s, r.kinetic_end
+                );
+                runs.push(r);
+            }
+            table += &format!(
+                "| {kind} | {seeds} | {steps} | {engine} | {wall_sum:.2} | {} |\n",
+                summary(&runs)
+            );
+        }
+    }
+    table
 }
 
 fn clusters() -> Scene {
@@ -333,7 +453,7 @@ fn main() {
     let wanted_engines = knobs::list("QUALITY_ENGINES");
     for w in wanted_cases.iter().flatten() {
         assert!(
-            cases.iter().any(|c| c.name == w),
+            w == "settling-sweep" || cases.iter().any(|c| c.name == w),
             "QUALITY_CASES: {w:?} is not one of {:?}",
             cases.iter().map(|c| c.name).collect::<Vec<_>>()
         );
@@ -373,7 +493,7 @@ fn main() {
             (
                 "soda",
                 "SODA",
-                run_soda as fn(&Scene, u64) -> (f64, State, State),
+                run_soda as fn(&Scene, u64, Observer) -> (f64, State, State),
             ),
             ("rapier", "Rapier 0.36", run_rapier),
         ] {
@@ -383,7 +503,7 @@ fn main() {
             {
                 continue;
             }
-            let (wall, first, last) = run(&case.scene, case.steps);
+            let (wall, first, last) = run(&case.scene, case.steps, None);
             let values = (case.measure)(&case.scene, &first, &last);
             eprintln!("quality: {} {engine}: {wall:.3} s, {values:?}", case.name);
             let shown: Vec<String> = values
@@ -405,6 +525,24 @@ fn main() {
         rows.push(serde_json::json!({"scene": case.name, "steps": case.steps, "figures": figures}));
     }
     println!("\n{table}");
+    if wanted_cases
+        .as_ref()
+        .is_none_or(|w| w.iter().any(|n| n == "settling-sweep"))
+    {
+        let engines: Vec<(&str, &'static str)> = [("soda", "SODA"), ("rapier", "Rapier 0.36")]
+            .into_iter()
+            .filter(|(key, _)| {
+                wanted_engines
+                    .as_ref()
+                    .is_none_or(|w| w.iter().any(|n| n == key))
+            })
+            .collect();
+        let seeds = knobs::env("QUALITY_SEEDS", 8, 1);
+        let sweep = settling_sweep(seeds, steps(1800), &engines);
+        println!("{sweep}");
+        table += "\n";
+        table += &sweep;
+    }
     if !quick {
         let path = std::env::var_os("CARGO_TARGET_DIR")
             .map(std::path::PathBuf::from)
