@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what the viewer's browser test needs (tests/view_browser.rs): Debian's headless
-# Chromium and ChromeDriver, and Mesa's llvmpipe through EGL (libgl1-mesa-dri, libegl1 and
-# libegl-mesa0), the software GL the test and scripts/measure-view-fps.py draw WebGL with.
+# Chromium and ChromeDriver; and Mesa's llvmpipe through EGL (libgl1-mesa-dri, libegl1 and
+# libegl-mesa0), the software GL of `scripts/measure-view-fps.py --gl llvmpipe`.
 # With --lavapipe, also Mesa's Vulkan drivers (mesa-vulkan-drivers: lavapipe, for
 # `scripts/measure-view-fps.py --gl lavapipe`). Does nothing if all are there already.
 # .ci/run calls it.
