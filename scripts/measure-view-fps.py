@@ -6,6 +6,8 @@ Starts `soda view --port 0 ARGS`, opens the page in headless Chromium through Ch
 at a fixed window size, lets it warm up, then for --seconds counts on the page itself:
   page fps   requestAnimationFrame callbacks per second (the page's display rate);
   shown fps  distinct simulation frames drawn per second (window.soda.shown.step changing);
+  received   frames that came over the WebSocket per second (window.soda.frames), and how
+             many animation frames found none, one or more new frames since the last;
 and reads the page's own per-frame costs (window.soda.drawMs: draw(), the vertex writing (decoding happens on arrival),
 window.soda.renderMs: three.js render call; exponential averages), its render scale if it
 has one (window.sodaStats), Chromium's renderer-process task/script time (CDP
@@ -63,11 +65,14 @@ GL = {
 
 # Installed in the page: counts animation frames and distinct frames shown.
 COUNTERS = """
-const c = window.__measure = { raf: 0, shown: 0, last: null, t0: performance.now(), gaps: [] };
-let prev = performance.now();
+const c = window.__measure = { raf: 0, shown: 0, last: null, t0: performance.now(), gaps: [],
+  frames0: window.soda.frames, arrived: [0, 0, 0] };
+let prev = performance.now(), frames = window.soda.frames;
 function tick(now) {
   c.raf++;
   c.gaps.push(now - prev); prev = now;
+  // Frames that came over the WebSocket since the last animation frame: none, one, more.
+  c.arrived[Math.min(2, window.soda.frames - frames)]++; frames = window.soda.frames;
   const s = window.soda && window.soda.shown ? window.soda.shown.step : null;
   if (s !== null && s !== c.last) { c.shown++; c.last = s; }
   requestAnimationFrame(tick);
@@ -82,7 +87,7 @@ const gaps = c.gaps.slice().sort((a, b) => a - b);
 return { seconds: (now - c.t0) / 1000, raf: c.raf, shown: c.shown,
          gap_p50: gaps[Math.floor(gaps.length * 0.5)] || 0,
          gap_p95: gaps[Math.floor(gaps.length * 0.95)] || 0,
-         draw_ms: s.drawMs, render_ms: s.renderMs, frames_received: s.frames,
+         draw_ms: s.drawMs, render_ms: s.renderMs, received: s.frames - c.frames0, arrived: c.arrived,
          in_sight: s.drawn === undefined ? null : s.drawn, triangles: s.triangles === undefined ? null : s.triangles,
          step: s.shown ? s.shown.step : null, buffered: s.shown ? s.shown.buffered : null,
          stats: window.sodaStats ? JSON.parse(JSON.stringify(window.sodaStats)) : null,
@@ -267,6 +272,9 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
     return {
         "page_fps": round(r["raf"] / wall, 1),
         "shown_fps": round(r["shown"] / wall, 1),
+        # Frames received per second, and animation frames that found 0, 1, 2+ new frames.
+        "received_fps": round(r["received"] / wall, 1),
+        "arrived_per_tick": r["arrived"],
         "gap_ms_p50": round(r["gap_p50"], 1),
         "gap_ms_p95": round(r["gap_p95"], 1),
         "draw_ms": round(r["draw_ms"], 2),
@@ -364,7 +372,7 @@ def main():
             r = measure(b, a.view_args, a.seconds, a.warmup, a.window_size, p, shot, q, g)
             results[(b, p, q, g)].append(r)
             print(json.dumps({"soda": b, "page": p, "query": q, "gl": g, "run": run + 1, **r}), flush=True)
-    keys = ["page_fps", "shown_fps", "gap_ms_p50", "gap_ms_p95", "draw_ms", "render_ms",
+    keys = ["page_fps", "shown_fps", "received_fps", "gap_ms_p50", "gap_ms_p95", "draw_ms", "render_ms",
             "renderer_task_s_per_s", "scale"]
     print("# medians: " + ", ".join(keys))
     for (b, p, q, g), rs in results.items():
