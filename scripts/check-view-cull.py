@@ -76,6 +76,8 @@ def main():
     ap.add_argument("--screenshot", help="save PREFIX-VIEW-cull.png and PREFIX-VIEW-all.png")
     ap.add_argument("--flag", default="cull", choices=["cull", "lod"], help="what to switch off")
     ap.add_argument("--scale", default="1", help="the page's render scale")
+    ap.add_argument("--gl", default="swiftshader", choices=sorted(measure.GL),
+                    help="the software GL Chromium draws WebGL with (as in measure-view-fps.py)")
     ap.add_argument("view_args", nargs="*", help="soda view options (after --)")
     a = ap.parse_args()
     view_args = a.view_args or ["--objects", "8000", "--threads", "2", "--worlds", "8"]
@@ -95,7 +97,7 @@ def main():
             time.sleep(0.5)
             url = f"http://127.0.0.1:{pport}/?ws={ws}"
         url += ("&" if "?" in url else "?") + f"scale={a.scale}"
-        with measure.browser_session(a.window_size) as b:
+        with measure.browser_session(a.window_size, a.gl) as b:
             js = b.js
             measure.request("POST", b.s + "/url", {"url": url})
             deadline = time.time() + 60
@@ -110,7 +112,7 @@ def main():
             time.sleep(0.5)
             step = js("return window.soda.shown.step")
             print(f"# soda view {' '.join(view_args)}; step {step}; {a.window_size} at render scale {a.scale};"
-                  f" {a.flag} on against off")
+                  f" {a.flag} on against off; gl {a.gl}")
             home = js("const c = window.soda.camera; return c.position.toArray()")
             for name, view in VIEWS:
                 js("window.soda.camera.position.fromArray(arguments[0]); window.soda.controls.update(); return true", home)

@@ -1,10 +1,13 @@
 #!/usr/bin/env python3
-"""How fast the `soda view` page plays in headless Chromium (software GL, SwiftShader).
+"""How fast the `soda view` page plays in headless Chromium (software GL: SwiftShader or Mesa's
+llvmpipe, --gl).
 
 Starts `soda view --port 0 ARGS`, opens the page in headless Chromium through ChromeDriver
 at a fixed window size, lets it warm up, then for --seconds counts on the page itself:
   page fps   requestAnimationFrame callbacks per second (the page's display rate);
   shown fps  distinct simulation frames drawn per second (window.soda.shown.step changing);
+  received   frames that came over the WebSocket per second (window.soda.frames), and how
+             many animation frames found none, one or more new frames since the last;
 and reads the page's own per-frame costs (window.soda.drawMs: draw(), the vertex writing (decoding happens on arrival),
 window.soda.renderMs: three.js render call; exponential averages), its render scale if it
 has one (window.sodaStats), Chromium's renderer-process task/script time (CDP
@@ -20,6 +23,10 @@ and the medians are printed per binary. Needs python3 (standard library only), D
   scripts/measure-view-fps.py --query scale=1 --query scale=auto   # the page's render scale
   scripts/measure-view-fps.py --page web   # this checkout's page, without rebuilding soda
   scripts/measure-view-fps.py --floor 'n=0' --floor 'n=8000&mode=points' --runs 2   # three.js alone
+  scripts/measure-view-fps.py --gl swiftshader --gl llvmpipe --runs 3   # the software GL
+
+--gl lavapipe (Mesa's Vulkan, `scripts/install-browser-test-deps.sh --lavapipe`) is there to
+try: with Mesa 22.3 and Chromium 156 it gives WebGL 1 only, and three.js needs WebGL 2.
 
 Use it on an otherwise idle machine if you can: the page, Chromium's software GL and the
 simulation share its cores, and other work moves the numbers by a factor of two.
@@ -39,18 +46,33 @@ import sys
 import time
 import urllib.request
 
-CHROME_ARGS = [
-    "--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
-    "--use-angle=swiftshader", "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist",
-]
+CHROME_ARGS = ["--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--ignore-gpu-blocklist"]
+
+# The software GL behind Chromium's WebGL (--gl): Chromium's flags and the environment of
+# ChromeDriver (which Chromium inherits). Each run records the renderer the page really got
+# (WEBGL_debug_renderer_info) as "gl".
+GL = {
+    # SwiftShader (bundled with Chromium): ANGLE over SwiftShader's Vulkan, JIT-compiled.
+    "swiftshader": (["--use-angle=swiftshader", "--enable-unsafe-swiftshader"], {}),
+    # Mesa's llvmpipe (Debian's libgl1-mesa-dri, libegl-mesa0): ANGLE over desktop GL
+    # through EGL, headless, no display needed.
+    "llvmpipe": (["--use-gl=angle", "--use-angle=gl-egl", "--ozone-platform=headless"],
+                 {"LIBGL_ALWAYS_SOFTWARE": "1", "GALLIUM_DRIVER": "llvmpipe"}),
+    # Mesa's lavapipe (Debian's mesa-vulkan-drivers): ANGLE over Vulkan, lavapipe's ICD only.
+    "lavapipe": (["--use-angle=vulkan", "--enable-features=Vulkan", "--ozone-platform=headless"],
+                 {"VK_ICD_FILENAMES": "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json"}),
+}
 
 # Installed in the page: counts animation frames and distinct frames shown.
 COUNTERS = """
-const c = window.__measure = { raf: 0, shown: 0, last: null, t0: performance.now(), gaps: [] };
-let prev = performance.now();
+const c = window.__measure = { raf: 0, shown: 0, last: null, t0: performance.now(), gaps: [],
+  frames0: window.soda.frames, arrived: [0, 0, 0] };
+let prev = performance.now(), frames = window.soda.frames;
 function tick(now) {
   c.raf++;
   c.gaps.push(now - prev); prev = now;
+  // Frames that came over the WebSocket since the last animation frame: none, one, more.
+  c.arrived[Math.min(2, window.soda.frames - frames)]++; frames = window.soda.frames;
   const s = window.soda && window.soda.shown ? window.soda.shown.step : null;
   if (s !== null && s !== c.last) { c.shown++; c.last = s; }
   requestAnimationFrame(tick);
@@ -65,12 +87,17 @@ const gaps = c.gaps.slice().sort((a, b) => a - b);
 return { seconds: (now - c.t0) / 1000, raf: c.raf, shown: c.shown,
          gap_p50: gaps[Math.floor(gaps.length * 0.5)] || 0,
          gap_p95: gaps[Math.floor(gaps.length * 0.95)] || 0,
-         draw_ms: s.drawMs, render_ms: s.renderMs, frames_received: s.frames,
+         draw_ms: s.drawMs, render_ms: s.renderMs, received: s.frames - c.frames0, arrived: c.arrived,
          in_sight: s.drawn === undefined ? null : s.drawn, triangles: s.triangles === undefined ? null : s.triangles,
          step: s.shown ? s.shown.step : null, buffered: s.shown ? s.shown.buffered : null,
          stats: window.sodaStats ? JSON.parse(JSON.stringify(window.sodaStats)) : null,
          canvas: [document.querySelector('canvas').width, document.querySelector('canvas').height],
-         dpr: window.devicePixelRatio, gl: window.__gl || null };
+         dpr: window.devicePixelRatio, gl: renderer() };
+function renderer() {
+  const gl = document.createElement('canvas').getContext('webgl2');
+  const e = gl && gl.getExtension('WEBGL_debug_renderer_info');
+  return e ? gl.getParameter(e.UNMASKED_RENDERER_WEBGL) : null;
+}
 """
 
 
@@ -137,8 +164,9 @@ Browser = collections.namedtuple("Browser", "base s js cdp driver")
 
 
 @contextlib.contextmanager
-def browser_session(size):
-    """Headless Chromium through a ChromeDriver of its own, at window SIZE ("W,H").
+def browser_session(size, gl="swiftshader"):
+    """Headless Chromium through a ChromeDriver of its own, at window SIZE ("W,H"), WebGL
+    drawn by GL (a key of GL).
 
     Yields a Browser: base (ChromeDriver's address), s (the session's address),
     js(script, *args) (runs script in the page, returns its value), cdp(cmd, params)
@@ -146,7 +174,8 @@ def browser_session(size):
     and its browser). The session is deleted when the block ends normally; ChromeDriver
     is stopped either way."""
     port = free_port()
-    driver = subprocess.Popen(["chromedriver", f"--port={port}"],
+    gl_args, gl_env = GL[gl]
+    driver = subprocess.Popen(["chromedriver", f"--port={port}"], env={**os.environ, **gl_env},
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         base = f"http://127.0.0.1:{port}"
@@ -161,7 +190,7 @@ def browser_session(size):
                 time.sleep(0.1)
         caps = {"capabilities": {"alwaysMatch": {"browserName": "chrome", "goog:chromeOptions": {
             "binary": "/usr/bin/chromium",
-            "args": CHROME_ARGS + [f"--window-size={size}"]}}}}
+            "args": CHROME_ARGS + gl_args + [f"--window-size={size}"]}}}}
         session = request("POST", base + "/session", caps)["value"]["sessionId"]
         s = f"{base}/session/{session}"
         js = lambda script, *args: request(
@@ -192,7 +221,7 @@ def stop(static, viewer):
             viewer.wait()
 
 
-def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query=""):
+def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query="", gl="swiftshader"):
     viewer = subprocess.Popen([soda, "view", "--port", "0", *view_args],
                               stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     static = None
@@ -212,7 +241,7 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
             url = f"http://127.0.0.1:{pport}/?ws={ws}"
         if query:
             url += ("&" if "?" in url else "?") + query
-        with browser_session(size) as b:
+        with browser_session(size, gl) as b:
             js, cdp = b.js, b.cdp
             request("POST", b.s + "/url", {"url": url})
             deadline = time.time() + 60
@@ -243,6 +272,9 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
     return {
         "page_fps": round(r["raf"] / wall, 1),
         "shown_fps": round(r["shown"] / wall, 1),
+        # Frames received per second, and animation frames that found 0, 1, 2+ new frames.
+        "received_fps": round(r["received"] / wall, 1),
+        "arrived_per_tick": r["arrived"],
         "gap_ms_p50": round(r["gap_p50"], 1),
         "gap_ms_p95": round(r["gap_p95"], 1),
         "draw_ms": round(r["draw_ms"], 2),
@@ -257,11 +289,11 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
         "buffered": r["buffered"],
         "in_sight": r["in_sight"],
         "triangles": r["triangles"],
-        "gl": r["gl"],
+        "renderer": r["gl"],
     }
 
 
-def floor(query, seconds, warmup, size):
+def floor(query, seconds, warmup, size, gl="swiftshader"):
     """scripts/view-floor.html?QUERY (three.js alone) in the same browser set-up: page fps."""
     import shutil
     import tempfile
@@ -274,7 +306,7 @@ def floor(query, seconds, warmup, size):
                                    str(pport), "--directory", d],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
-            with browser_session(size) as b:
+            with browser_session(size, gl) as b:
                 request("POST", b.s + "/url", {"url": f"http://127.0.0.1:{pport}/index.html?{query}"})
                 time.sleep(warmup)
                 b.js(COUNTERS)
@@ -282,8 +314,10 @@ def floor(query, seconds, warmup, size):
                 r = b.js(READ)
         finally:
             stop(static, None)
-    return {"page_fps": round(r["raf"] / r["seconds"], 1), "update_ms": round(r["draw_ms"], 2),
-            "render_ms": round(r["render_ms"], 2)}
+    return {"page_fps": round(r["raf"] / r["seconds"], 1),
+            "gap_ms_p50": round(r["gap_p50"], 1), "gap_ms_p95": round(r["gap_p95"], 1),
+            "update_ms": round(r["draw_ms"], 2), "render_ms": round(r["render_ms"], 2),
+            "loadavg": round(os.getloadavg()[0], 1), "renderer": r["gl"]}
 
 
 def main():
@@ -301,37 +335,49 @@ def main():
     ap.add_argument("--floor", action="append",
                     help="instead of soda view, measure scripts/view-floor.html?FLOOR (three.js "
                          "alone: e.g. n=8000&mode=points); repeat to compare")
+    ap.add_argument("--gl", action="append", choices=sorted(GL),
+                    help="the software GL Chromium draws WebGL with (default swiftshader); "
+                         "repeat to compare")
     ap.add_argument("--screenshot", help="save a screenshot of each run's page as PREFIX-N.png")
     ap.add_argument("view_args", nargs="*",
                     default=["--objects", "8000", "--threads", "2", "--worlds", "8"],
                     help="soda view options (after --)")
     a = ap.parse_args()
+    gls = a.gl or ["swiftshader"]
     if a.floor:
         print(f"# scripts/view-floor.html, {a.seconds:g} s after {a.warmup:g} s, window {a.window_size}; "
               f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
+        results = {(q, g): [] for q in a.floor for g in gls}
         for run in range(a.runs):
             for q in a.floor:
-                print(json.dumps({"floor": q, "run": run + 1, **floor(q, a.seconds, a.warmup, a.window_size)}), flush=True)
+                for g in gls:
+                    r = floor(q, a.seconds, a.warmup, a.window_size, g)
+                    results[(q, g)].append(r)
+                    print(json.dumps({"floor": q, "gl": g, "run": run + 1, **r}), flush=True)
+        print("# medians: page_fps, gap_ms_p50, gap_ms_p95")
+        for (q, g), rs in results.items():
+            print(f"floor {q} gl {g}: " + ", ".join(
+                f"{k} {statistics.median(r[k] for r in rs):g}" for k in ["page_fps", "gap_ms_p50", "gap_ms_p95"]))
         return 0
     binaries = a.soda or ["target/release/soda"]
     pages = a.page or [None]
     queries = a.query or [""]
-    variants = [(b, p, q) for b in binaries for p in pages for q in queries]
+    variants = [(b, p, q, g) for b in binaries for p in pages for q in queries for g in gls]
     print(f"# soda view {' '.join(a.view_args)}; {a.seconds:g} s measured after {a.warmup:g} s, "
           f"window {a.window_size}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
     results = {v: [] for v in variants}
     for run in range(a.runs):
-        for i, (b, p, q) in enumerate(variants):
+        for i, (b, p, q, g) in enumerate(variants):
             shot = f"{a.screenshot}-{run + 1}-{i}.png" if a.screenshot else None
-            r = measure(b, a.view_args, a.seconds, a.warmup, a.window_size, p, shot, q)
-            results[(b, p, q)].append(r)
-            print(json.dumps({"soda": b, "page": p, "query": q, "run": run + 1, **r}), flush=True)
-    keys = ["page_fps", "shown_fps", "gap_ms_p50", "gap_ms_p95", "draw_ms", "render_ms",
+            r = measure(b, a.view_args, a.seconds, a.warmup, a.window_size, p, shot, q, g)
+            results[(b, p, q, g)].append(r)
+            print(json.dumps({"soda": b, "page": p, "query": q, "gl": g, "run": run + 1, **r}), flush=True)
+    keys = ["page_fps", "shown_fps", "received_fps", "gap_ms_p50", "gap_ms_p95", "draw_ms", "render_ms",
             "renderer_task_s_per_s", "scale"]
     print("# medians: " + ", ".join(keys))
-    for (b, p, q), rs in results.items():
-        print(f"{b}{' page ' + p if p else ''}{' ?' + q if q else ''}: " + ", ".join(f"{k} {statistics.median(r[k] for r in rs):g}" for k in keys))
-
+    for (b, p, q, g), rs in results.items():
+        print(f"{b}{' page ' + p if p else ''}{' ?' + q if q else ''} gl {g}: "
+              + ", ".join(f"{k} {statistics.median(r[k] for r in rs):g}" for k in keys))
 
 if __name__ == "__main__":
     sys.exit(main())
