@@ -336,7 +336,13 @@ function setUpScene(s) {
 }
 
 // --- frames -------------------------------------------------------------------------------
-let pending = null;     // the latest frame's bytes, not yet drawn (decoded only when drawn)
+// Frames received and not yet drawn (bytes, oldest first; decoded only when drawn). Frames
+// arrive at the display rate but bunched (two in one animation frame, none in the next):
+// drawing the oldest of a few queued ones shows each of them, one per animation frame, where
+// keeping only the newest dropped every second frame of a bunch. A page slower than the
+// stream drops the oldest beyond `QUEUED_MAX`, so the picture lags by at most that many.
+const queued = [];
+const QUEUED_MAX = 3;
 
 function decode(buffer) {
   const v = new DataView(buffer);
@@ -558,7 +564,8 @@ function connect() {
       else if (m.type === 'saved') { soda.saved = m; say(`saved at step ${m.step}, hash ${m.hash}:\n${m.command}`); }
       return;
     }
-    pending = e.data;
+    queued.push(e.data);
+    if (queued.length > QUEUED_MAX) queued.shift();
     soda.frames++;
   };
   socket.onclose = () => setTimeout(connect, 1000);
@@ -686,10 +693,9 @@ window.addEventListener('resize', () => { placeAgain = true; });
 function loop(now) {
   stats.ticks++;
   const t0 = performance.now();
-  if (pending && soda.scene) {
+  if (queued.length > 0 && soda.scene) {
     let f = null;
-    try { f = decode(pending); } catch (err) { say(String(err)); }
-    pending = null;
+    try { f = decode(queued.shift()); } catch (err) { say(String(err)); }
     if (f) { draw(f); lastFrame = f; placeAgain = true; }
   }
   if (controls.update()) placeAgain = true;
