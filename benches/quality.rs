@@ -87,8 +87,8 @@ fn pile(s: &State) -> Vec<PileBody> {
     s.iter().map(PileBody::from_soda).collect()
 }
 
-/// Called with the step number and the state after every step (outside the timed part's
-/// figures only in that the state is built for it).
+/// Called with the step number and the bodies after every step (the settling sweep's measure);
+/// building that state is inside the timed loop.
 type Observer<'a> = Option<&'a mut dyn FnMut(u64, &State)>;
 
 fn soda_state(sim: &Simulation) -> State {
