@@ -44,6 +44,11 @@ mod rapier_world;
 use common::{measure_pile, Footprint, PileBody};
 #[path = "common/settling_sweep.rs"]
 mod settling_sweep;
+// The physics-law tests' random piles: the sweep measures the same scenes.
+#[allow(dead_code)]
+#[path = "../tests/physics_support/mod.rs"]
+mod physics_support;
+use physics_support::mixed_pile;
 use rand::{Rng, SeedableRng};
 use rapier3d_new::math::Vector;
 use rapier3d_new::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyHandle};
@@ -217,49 +222,6 @@ fn ball_box_seeded(seed: u64, restitution: f32, friction: f32, gravity: bool) ->
         });
     }
     b.build().expect("the ball box builds")
-}
-
-/// 150 balls and boxes of random sizes, materials and orientations dropped from a 6-layer
-/// lattice into a walled 4 m × 4 m box under gravity (as the physics-law tests' settling
-/// piles, `tests/physics_laws.rs`).
-fn mixed_pile(seed: u64) -> Scene {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut b = SceneBuilder::new([0.0; 3], [4.0, 8.0, 4.0])
-        .walls(true, false)
-        .environment_material(0.5, 0.3);
-    for k in 0..150u64 {
-        let c = [k % 5, k / 25, (k / 5) % 5].map(|c| c as f32);
-        let mut jitter = || rng.random_range(-0.015f32..0.015);
-        let position = [
-            0.4 + 0.8 * c[0] + jitter(),
-            0.5 + 0.8 * c[1],
-            0.4 + 0.8 * c[2] + jitter(),
-        ];
-        let shape = if rng.random_bool(0.5) {
-            Shape::Ball {
-                radius: rng.random_range(0.15f32..0.35),
-            }
-        } else {
-            Shape::Cuboid {
-                half_extents: [0, 1, 2].map(|_| rng.random_range(0.12f32..0.21)),
-            }
-        };
-        let material = Material {
-            density: rng.random_range(0.5f32..2.0),
-            friction: rng.random_range(0.2f32..0.8),
-            restitution: rng.random_range(0.0f32..0.6),
-        };
-        b = b.body_spec(BodySpec {
-            id: k,
-            shape,
-            material,
-            position,
-            rotation: [0, 1, 2].map(|_| rng.random_range(-3.0f32..3.0)),
-            velocity: [0, 1, 2].map(|_| rng.random_range(-1.0f32..1.0)),
-            angular_velocity: [0.0; 3],
-        });
-    }
-    b.build().expect("the mixed pile builds")
 }
 
 /// Settling over seeds (`settling-sweep`, [`settling_sweep`]): `seeds` mixed piles and ball
