@@ -88,22 +88,12 @@ impl<M: CellModel> ReferenceRun<M> {
         self.state.cell_at(i).iter().all(|s| self.model.at_rest(s))
     }
 
-    /// Recomputes the at-rest flag of the cells `touched` (linear indices), or of every
-    /// cell with `None`, from the current state.
-    fn update_rest(&mut self, touched: Option<&[usize]>) {
-        let mut rest = std::mem::take(&mut self.rest);
-        match touched {
-            Some(touched) => {
-                for &i in touched {
-                    rest[i] = self.cell_at_rest(i);
-                }
-            }
-            None => {
-                rest.clear();
-                rest.extend((0..self.state.cell_count()).map(|i| self.cell_at_rest(i)));
-            }
+    /// Recomputes the at-rest flag of the cells `touched` (linear indices) from the current
+    /// state (binning recomputes every cell's, [`Derived::rest`]).
+    fn update_rest(&mut self, touched: &[usize]) {
+        for &i in touched {
+            self.rest[i] = self.cell_at_rest(i);
         }
-        self.rest = rest;
     }
 
     /// Whether every cell of the 27-neighbourhood of cell `i` is at rest (cells outside the
@@ -358,8 +348,8 @@ impl<M: CellModel> ReferenceRun<M> {
                 &mut self.scratch,
                 derived,
             );
-            if touched.is_some() {
-                self.update_rest(touched.as_deref());
+            if let Some(touched) = &touched {
+                self.update_rest(touched);
             }
         }
         // With no cell computed and no input, the state is the previous one, bit for bit,
