@@ -65,7 +65,8 @@ impl SettlingTrack {
     }
 }
 
-/// The summary of one kind of scene for one engine over its seeds.
+/// The summary of one kind of scene for one engine over its seeds (the median of an even
+/// count is the upper of the two middle values).
 pub fn summary(runs: &[SettlingRun]) -> String {
     let mut rises: Vec<f64> = runs.iter().map(|r| r.rise).collect();
     rises.sort_by(f64::total_cmp);
