@@ -185,6 +185,31 @@ impl Body {
             && self.angvel.norm() * self.shape.bounding_radius() <= speed
     }
 
+    /// The world-frame inverse inertia at orientation `q`, `R · diag(I⁻¹) · Rᵀ`; exactly
+    /// `I⁻¹` times the identity for a body whose principal inverse inertias are equal (a ball,
+    /// a cube), whose inertia does not depend on its orientation. Rounding the product made a
+    /// ball's tangential friction impulse spin it about the contact normal (1e-24 rad/s from
+    /// rest), which torsional friction must then stop (SPEC.md §5.3).
+    pub fn world_inv_inertia(&self, q: &Quat) -> nalgebra::Matrix3<f32> {
+        let d = self.inv_inertia;
+        if d.x == d.y && d.y == d.z {
+            return nalgebra::Matrix3::from_diagonal_element(d.x);
+        }
+        let r = q.to_rotation_matrix().into_inner();
+        r * nalgebra::Matrix3::from_diagonal(&d) * r.transpose()
+    }
+
+    /// `I⁻¹ v` in world frame at orientation `q` (exactly `I⁻¹ v` for equal principal inverse
+    /// inertias, as [`Body::world_inv_inertia`]).
+    pub fn world_inv_inertia_times(&self, q: &Quat, v: &Vec3) -> Vec3 {
+        let d = self.inv_inertia;
+        if d.x == d.y && d.y == d.z {
+            return v * d.x;
+        }
+        let local = q.inverse_transform_vector(v);
+        q.transform_vector(&local.component_mul(&d))
+    }
+
     /// Mass in kg.
     pub fn mass(&self) -> f32 {
         1.0 / self.inv_mass

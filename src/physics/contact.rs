@@ -45,10 +45,10 @@ pub enum SetRole {
     /// and a body `i` rests on (a support, whose inverse mass counts as 0).
     #[default]
     Whole,
-    /// A pile contact: the partner is a movable body resting against `i` in a supported pile,
-    /// solved here with the partner's inverse mass, so each of the two bodies takes its share
-    /// of the contact; its position correction is added whole rather than averaged with the
-    /// other partners' (the two shares remove the overlap once).
+    /// A pile contact: the partner is a movable body resting against `i` in a supported pile.
+    /// Each of the two bodies removes its share of the approach and of the overlap (by the
+    /// two inverse masses and its mobility against its supports, SPEC.md §5.3); its position
+    /// correction is added whole rather than averaged with the other partners'.
     Pile,
     /// The partner rests on `i` (a support whose lower body is `i`). Its weight is not `i`'s
     /// to carry (shock propagation), but `i` must not push into it for free: only `i`'s own
@@ -74,8 +74,7 @@ pub(crate) fn inv_mass_at(body: &Body, rot: &crate::math::Quat, r: &Vec3, n: &Ve
 
 /// `I⁻¹ v` in world frame for a body with orientation `rot`.
 pub(crate) fn inv_inertia_world(body: &Body, rot: &crate::math::Quat, v: &Vec3) -> Vec3 {
-    let local = rot.inverse_transform_vector(v);
-    rot.transform_vector(&local.component_mul(&body.inv_inertia))
+    body.world_inv_inertia_times(rot, v)
 }
 
 /// How far apart (surface to surface) a body may be from a partner at step `t` and still

@@ -100,11 +100,10 @@ struct Side {
 
 impl Side {
     fn of(b: &Body) -> Side {
-        let r = b.rotation.to_rotation_matrix().into_inner();
         Side {
             id: b.id,
             inv_mass: b.inv_mass,
-            inv_inertia: r * Matrix3::from_diagonal(&b.inv_inertia) * r.transpose(),
+            inv_inertia: b.world_inv_inertia(&b.rotation),
             v: b.linvel,
             w: b.angvel,
         }

@@ -25,10 +25,9 @@ pub(crate) fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
     Quat::new_normalize(q.quaternion() + dq)
 }
 
-/// The world-frame inverse inertia of `body` at orientation `q`, `R · diag(I⁻¹) · Rᵀ`.
+/// The world-frame inverse inertia of `body` at orientation `q` ([`Body::world_inv_inertia`]).
 fn inv_inertia_matrix(body: &Body, q: &Quat) -> Matrix3<f32> {
-    let r = q.to_rotation_matrix().into_inner();
-    r * Matrix3::from_diagonal(&body.inv_inertia) * r.transpose()
+    body.world_inv_inertia(q)
 }
 
 /// The frame of one pass: the orientation's matrix and the world inverse inertia.
@@ -74,7 +73,9 @@ struct PositionRow {
     offset: Vec3,
     /// `I⁻¹ (r × n)`: the rotation a unit normal position impulse adds.
     irn: Vec3,
-    /// Inverse of the generalised inverse mass along the normal, partner included.
+    /// Position impulse per metre of overlap: the inverse of the generalised inverse mass
+    /// along the normal, partner included; for a pile contact the body's share of the
+    /// overlap over its own generalised inverse mass (`s / w_i`, [`pile_share`]).
     inv_w: f32,
     /// Gap at the predicted pose to the partner's point one substep ahead, m.
     gap: f32,
@@ -92,6 +93,18 @@ struct ImpactRow {
     inv_w: f32,
     /// Approach speed the gap allows within the substep, m/s.
     gap_speed: f32,
+    /// A pile contact's split (SPEC.md §5.3): the share of the start's deficit the body
+    /// removes itself ([`pile_share`]); 1 for other sets.
+    share: f32,
+    /// The body's own normal velocity `n·(v + ω × r)` at the start of the step (with the
+    /// substep's offset `r`), from which a pile contact's target is measured; unused for
+    /// other sets.
+    start_vn: f32,
+    /// Generalised inverse mass of the row's impulses: the body's own for a pile contact
+    /// (only this body moves in its solve), the pair's otherwise.
+    w_solve: f32,
+    /// `1 / w_solve`.
+    inv_w_solve: f32,
 }
 
 /// Offset of contact point `cp` from the body's centre at orientation `rot` (a ball's is
@@ -142,7 +155,9 @@ fn cancelling_spin(body: &Body, q: &Quat, w: &Vec3, dw: &Vec3, allowance: f32) -
 /// The spin change of torsional friction at a point with normal `n` (SPEC.md §5.3): the
 /// angular impulse about `n` that stops the spin `ω·n`, bounded by `cap` (μ·N·patch radius),
 /// as `I⁻¹·n·L`; zero if there is no spin about `n`. It only removes rotational energy: the
-/// spin about `n` moves towards 0 and never past it.
+/// spin about `n` moves towards 0 and never past it. A full stop computes `ω·n − k·(ω·n / k)`,
+/// which rounding can leave an ulp on the other side of zero (0.061 → −1.9e-9 rad/s): then
+/// the impulse is shortened by two ulps, and if even that crosses, dropped.
 fn torsional_impulse(f: &Frame, w: &Vec3, n: &Vec3, cap: f32) -> Vec3 {
     let spin = w.dot(n);
     let i_n = f.inv_inertia * n;
@@ -150,7 +165,59 @@ fn torsional_impulse(f: &Frame, w: &Vec3, n: &Vec3, cap: f32) -> Vec3 {
     if spin == 0.0 || k <= 0.0 || cap <= 0.0 {
         return Vec3::zeros();
     }
-    i_n * (spin / k).clamp(-cap, cap)
+    let dw = i_n * (spin / k).clamp(-cap, cap);
+    // By signs, not by the product's: `1e-31 · 1e-24` underflows to −0.
+    let crosses = |dw: &Vec3| {
+        let after = (w - dw).dot(n);
+        after != 0.0 && (after < 0.0) != (spin < 0.0)
+    };
+    if !crosses(&dw) {
+        return dw;
+    }
+    let short = dw * (1.0 - 2.0 * f32::EPSILON);
+    if crosses(&short) {
+        Vec3::zeros()
+    } else {
+        short
+    }
+}
+
+/// How freely the body can move along `n` against its immovable contacts (`Whole` sets: the
+/// environment and the bodies it rests on): the product over those sets of `1 − (m·n)²` for
+/// the set's most opposing normal `m` (`m·n < 0`, a push along `n` drives the body into
+/// it). 1 on flat ground pushed sideways, 0 against a wall pushed into it, in between for a
+/// slope or a groove it would have to climb.
+fn mobility(sets: &[ContactSet], n: &Vec3) -> f32 {
+    let mut f = 1.0f32;
+    for set in sets {
+        if set.role != SetRole::Whole {
+            continue;
+        }
+        let most = set
+            .points
+            .iter()
+            .map(|cp| cp.normal.dot(n))
+            .fold(0.0f32, f32::min);
+        if most < 0.0 {
+            f *= (1.0 - most * most).max(0.0);
+        }
+    }
+    f
+}
+
+/// The share of a pile contact's approach (or overlap) that the body removes itself (SPEC.md
+/// §5.3): `f·w / (f·w + w_j)` with `w` and `w_j` the two generalised inverse masses along
+/// the normal and `f` the body's [`mobility`] along it. The partner removes its own share in
+/// its own solve; with `f = 1` on both sides the two shares sum to 1, with less they sum to
+/// less and the rest is left to later steps. A body its supports hold in place leaves the
+/// contact to its partner instead of being wedged up its supports.
+fn pile_share(mobility: f32, w_own: f32, w_partner: f32) -> f32 {
+    let yielding = mobility * w_own;
+    if yielding + w_partner > 0.0 {
+        yielding / (yielding + w_partner)
+    } else {
+        1.0
+    }
 }
 
 /// Applies impulse `imp` at offset `r` to the velocities `v`, `w`.
@@ -188,6 +255,19 @@ pub(crate) fn solve_body(
     let mut engaged_sets = vec![false; sets.len()];
     let mut bounced_sets = vec![false; sets.len()];
     let rest_threshold = 2.0 * gravity.norm() * h;
+    // Each pile point's mobility along its normal (the normals are fixed for the step).
+    let mobilities: Vec<f32> = sets
+        .iter()
+        .flat_map(|set| {
+            set.points.iter().map(move |cp| {
+                if set.role == SetRole::Pile {
+                    mobility(sets, &cp.normal)
+                } else {
+                    1.0
+                }
+            })
+        })
+        .collect();
 
     for _ in 0..n_sub {
         // Start of the substep: offsets, approach speeds (for restitution).
@@ -225,12 +305,27 @@ pub(crate) fn solve_body(
                 engaged |= gap0 + vn * h < 0.0;
                 let rn = r.cross(&cp.normal);
                 let irn = f0.inv_inertia * rn;
+                let w_own = f0.inv_mass + rn.dot(&irn);
+                let pile = set.role == SetRole::Pile;
+                let w_solve = if pile {
+                    w_own
+                } else {
+                    w_own + cp.partner_inv_mass
+                };
                 impact[k] = ImpactRow {
                     rn,
                     irn,
-                    inv_w: 1.0 / (f0.inv_mass + rn.dot(&irn) + cp.partner_inv_mass),
-                    w: f0.inv_mass + rn.dot(&irn) + cp.partner_inv_mass,
+                    w: w_own + cp.partner_inv_mass,
+                    inv_w: 1.0 / (w_own + cp.partner_inv_mass),
+                    w_solve,
+                    inv_w_solve: 1.0 / w_solve,
                     gap_speed: gap0.max(0.0) / h,
+                    share: if pile {
+                        pile_share(mobilities[k], w_own, cp.partner_inv_mass)
+                    } else {
+                        1.0
+                    },
+                    start_vn: cp.normal.dot(&(body.linvel + body.angvel.cross(&r))),
                 };
                 k += 1;
             }
@@ -250,14 +345,26 @@ pub(crate) fn solve_body(
                     // n·(v + ω × r) = n·v + ω·(r × n).
                     let vn = cp.normal.dot(&b.linvel) + b.angvel.dot(&row.rn);
                     let target = -row.gap_speed.min(limit);
+                    // A pile contact: the partner, solving the same contact in its own solve
+                    // from the same step-`t` states, removes its share of the approach the
+                    // two had at the start of the step; the approach this body gains within
+                    // its solve (gravity, its supports), which the partner cannot see, is
+                    // this body's to stop. Target: its share of the start's deficit. (Each
+                    // body stopping all of it, the pair's approach was removed twice and the
+                    // two rebounded from each other every other step.)
+                    let target = if row.share < 1.0 {
+                        row.start_vn + (target - row.start_vn) * row.share
+                    } else {
+                        target
+                    };
                     let acc = scratch[k].impulse;
-                    let next = (acc + (target - vn) * row.inv_w).max(0.0);
+                    let next = (acc + (target - vn) * row.inv_w_solve).max(0.0);
                     if next != acc {
                         let d = next - acc;
                         b.linvel += cp.normal * (d * f0.inv_mass);
                         b.angvel += row.irn * d;
                         scratch[k].impulse = next;
-                        largest_change = largest_change.max(d.abs() * row.w);
+                        largest_change = largest_change.max(d.abs() * row.w_solve);
                     }
                     k += 1;
                 }
@@ -359,7 +466,13 @@ pub(crate) fn solve_body(
                 position[k + m] = PositionRow {
                     offset: r0,
                     irn,
-                    inv_w: 1.0 / (fp.inv_mass + rn.dot(&irn) + cp.partner_inv_mass),
+                    // Own share of the overlap (`share · gap / w_own`); the pair's for others.
+                    inv_w: if set.role == SetRole::Pile {
+                        let w_own = fp.inv_mass + rn.dot(&irn);
+                        pile_share(mobilities[k + m], w_own, cp.partner_inv_mass) / w_own
+                    } else {
+                        1.0 / (fp.inv_mass + rn.dot(&irn) + cp.partner_inv_mass)
+                    },
                     gap: cp.normal.dot(&(xp + r0 - pj)),
                 };
             }

@@ -84,3 +84,36 @@ pub fn mixed_pile(seed: u64) -> Scene {
         )
     })
 }
+
+/// 512 balls of radius 0.3 m (density 1) on a lattice 1 m apart, jittered by up to 0.1 m per
+/// axis, in a walled and closed 8 m box, each with a velocity within ±3 m/s per axis; under
+/// gravity unless `gravity` is false. The quality bench's ball gases.
+pub fn ball_box(seed: u64, restitution: f32, friction: f32, gravity: bool) -> Scene {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut b = SceneBuilder::new([0.0; 3], [8.0; 3])
+        .walls(true, true)
+        .environment_material(friction, restitution);
+    if !gravity {
+        b = b.gravity([0.0; 3]);
+    }
+    for k in 0..512u64 {
+        let c = [k % 8, (k / 8) % 8, k / 64].map(|c| c as f32 + 0.5);
+        let mut jit = || rng.random_range(-0.1f32..=0.1);
+        let position = [c[0] + jit(), c[1] + jit(), c[2] + jit()];
+        b = b.body_spec(BodySpec {
+            id: k,
+            shape: Shape::Ball { radius: 0.3 },
+            material: Material {
+                density: 1.0,
+                friction,
+                restitution,
+            },
+            position,
+            rotation: [0.0; 3],
+            velocity: [0, 1, 2].map(|_| rng.random_range(-3.0f32..=3.0)),
+            angular_velocity: [0.0; 3],
+        });
+    }
+    b.build().unwrap()
+}
