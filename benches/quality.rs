@@ -21,8 +21,9 @@
 //! (SODA's `Body::kinetic_energy` on bodies rebuilt from Rapier's state).
 //!
 //! Then `settling-sweep` (benches/common/settling_sweep.rs): one settling scene is a lottery,
-//! so `QUALITY_SEEDS` (default 8) random mixed piles (150 balls and boxes, as the physics-law
-//! tests' piles) and ball gases under gravity (`gas-settling` with other seeds), 1,800 steps
+//! so `QUALITY_SEEDS` (default 8) random mixed piles (150 balls and boxes), ball piles (225
+//! balls of random radii and densities; both as the physics-law tests' piles) and ball gases
+//! under gravity (`gas-settling` with other seeds), 1,800 steps
 //! each: the largest rise of kinetic + potential energy after 5 s, and how many are still
 //! moving at 10 s and at 30 s, worst and median over the seeds, per engine.
 //!
@@ -48,8 +49,7 @@ mod settling_sweep;
 #[allow(dead_code)]
 #[path = "../tests/physics_support/mod.rs"]
 mod physics_support;
-use physics_support::mixed_pile;
-use rand::{Rng, SeedableRng};
+use physics_support::{ball_pile, mixed_pile};
 use rapier3d_new::math::Vector;
 use rapier3d_new::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyHandle};
 use rapier_world::insert_body;
@@ -184,54 +184,21 @@ fn run_rapier(scene: &Scene, steps: u64, mut observe: Observer) -> (f64, State, 
     (wall, first, last)
 }
 
-/// Random velocities, ±`speed` per axis, seeded.
-fn random_velocity(rng: &mut rand_chacha::ChaCha8Rng, speed: f32) -> [f32; 3] {
-    [0, 1, 2].map(|_| rng.random_range(-speed..=speed))
-}
-
 /// 512 balls of radius 0.3 m on a jittered lattice (1 m apart) in an 8 m box.
 fn ball_box(restitution: f32, friction: f32, gravity: bool) -> Scene {
-    ball_box_seeded(23, restitution, friction, gravity)
+    physics_support::ball_box(23, restitution, friction, gravity)
 }
 
-/// [`ball_box`] with the jitter and velocities drawn from `seed`.
-fn ball_box_seeded(seed: u64, restitution: f32, friction: f32, gravity: bool) -> Scene {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut b = SceneBuilder::new([0.0; 3], [8.0; 3])
-        .walls(true, true)
-        .environment_material(friction, restitution);
-    if !gravity {
-        b = b.gravity([0.0; 3]);
-    }
-    for k in 0..512u64 {
-        let c = [k % 8, (k / 8) % 8, k / 64].map(|c| c as f32 + 0.5);
-        let mut jit = || rng.random_range(-0.1f32..=0.1);
-        let position = [c[0] + jit(), c[1] + jit(), c[2] + jit()];
-        b = b.body_spec(BodySpec {
-            id: k,
-            shape: Shape::Ball { radius: 0.3 },
-            material: Material {
-                density: 1.0,
-                friction,
-                restitution,
-            },
-            position,
-            rotation: [0.0; 3],
-            velocity: random_velocity(&mut rng, 3.0),
-            angular_velocity: [0.0; 3],
-        });
-    }
-    b.build().expect("the ball box builds")
-}
-
-/// Settling over seeds (`settling-sweep`, [`settling_sweep`]): `seeds` mixed piles and ball
-/// gases under gravity, `steps` steps each, in each wanted engine. Returns the markdown rows.
+/// Settling over seeds (`settling-sweep`, [`settling_sweep`]): `seeds` mixed piles, ball
+/// piles and ball gases under gravity, `steps` steps each, in each wanted engine. Returns the
+/// markdown rows.
 fn settling_sweep(seeds: u64, steps: u64, engines: &[(&str, &'static str)]) -> String {
     type Run = fn(&Scene, u64, Observer) -> (f64, State, State);
     type Build = fn(u64) -> Scene;
-    let gas: Build = |seed| ball_box_seeded(seed, 0.5, 0.5, true);
+    let gas: Build = |seed| physics_support::ball_box(seed, 0.5, 0.5, true);
     let kinds = [
         ("mixed piles (150 balls and boxes)", mixed_pile as Build),
+        ("ball piles (225 balls)", ball_pile as Build),
         ("ball gas under gravity (512 balls)", gas),
     ];
     let mut table = String::from(
