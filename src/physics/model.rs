@@ -59,7 +59,8 @@ struct Contacts<'a> {
     /// bodies it rests on and pile contacts (SPEC.md §5.2, §5.3).
     sets: Vec<ContactSet>,
     /// Awake bodies resting on this one, with their manifolds, ascending id: each becomes a
-    /// carried set if the body approaches it at the start of its solve (SPEC.md §5.2).
+    /// carried set if the body approaches it at the start or at the end of its solve
+    /// (SPEC.md §5.2).
     carried: Vec<(&'a Body, PairManifold)>,
     /// Symmetric pair contacts, ascending partner id.
     pairs: Vec<PairEntry<'a>>,
@@ -544,6 +545,13 @@ impl<'a> Candidate<'a> {
 /// Body `i`'s contact set for a pile contact with `j` (SPEC.md §5.3): the partner's inverse
 /// mass, restitution 0 (a resting contact does not bounce), and a position correction added
 /// whole.
+/// Inserts `set` into `sets` (ascending partner id, the static environment last) at its place.
+fn insert_by_partner(sets: &mut Vec<ContactSet>, set: ContactSet) {
+    let partner = set.partner;
+    let at = sets.partition_point(|s| s.partner.is_some() && s.partner < partner);
+    sets.insert(at, set);
+}
+
 fn pile_contact(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
     resting_view(i, j, m, SetRole::Pile)
 }
@@ -765,19 +773,34 @@ impl CellModel for RigidBodyModel {
             let mut start = own.clone();
             start.linvel += effect.dv;
             start.angvel += effect.dw;
-            // A carried set acts only if the body, with its pairs' impulses, approaches the
-            // body it carries (SPEC.md §5.2); building only those saves the work of every
-            // resting column. Inserted in ascending partner id, before the environment.
+            // A carried set acts only if the body approaches the body it carries (SPEC.md
+            // §5.2): with its pairs' impulses at the start of its solve, or else at the end
+            // of it (it slid into it within the step), in which case the body is solved again
+            // with it. Building only those saves the work of every resting column. Inserted
+            // in ascending partner id, before the environment.
+            let mut left_out = Vec::new();
             for (j, m) in &found.carried {
                 let set = carried_contact(&start, j, m);
                 if approaches(&start, &set) {
-                    let at = found
-                        .sets
-                        .partition_point(|s| s.partner.is_some_and(|p| p < j.id));
-                    found.sets.insert(at, set);
+                    insert_by_partner(&mut found.sets, set);
+                } else {
+                    left_out.push(set);
                 }
             }
             let mut next = solve_body(&start, &found.sets, self.gravity, self.dt, &self.params);
+            let mut at_end = start.clone();
+            at_end.linvel = next.linvel;
+            at_end.angvel = next.angvel;
+            let mut resolve = false;
+            for set in left_out {
+                if approaches(&at_end, &set) {
+                    insert_by_partner(&mut found.sets, set);
+                    resolve = true;
+                }
+            }
+            if resolve {
+                next = solve_body(&start, &found.sets, self.gravity, self.dt, &self.params);
+            }
             next.position += effect.dx;
             if effect.dtheta != Vec3::zeros() {
                 next.rotation = integrate_rotation(&next.rotation, &effect.dtheta, 1.0);
