@@ -23,8 +23,7 @@
 //! Then `settling-sweep` (benches/common/settling_sweep.rs): one settling scene is a lottery,
 //! so `QUALITY_SEEDS` (default 8) random mixed piles (150 balls and boxes), ball piles (225
 //! balls of random radii and densities; both as the physics-law tests' piles) and ball gases
-//! under gravity (`gas-settling` with other seeds), 1,800 steps
-//! each: the largest rise of kinetic + potential energy after 5 s, and how many are still
+//! under gravity (`gas-settling` with other seeds), 1,800 steps each: the largest rise of kinetic + potential energy after 5 s, and how many are still
 //! moving at 10 s and at 30 s, worst and median over the seeds, per engine.
 //!
 //! `cargo bench --bench quality` prints a markdown table (and writes target/quality.json);
@@ -45,8 +44,7 @@ mod rapier_world;
 use common::{measure_pile, Footprint, PileBody};
 #[path = "common/settling_sweep.rs"]
 mod settling_sweep;
-// The physics-law tests' random piles: the sweep measures the same scenes.
-#[allow(dead_code)]
+// The physics-law tests' random scenes: the bench measures the same scenes.
 #[path = "../tests/physics_support/mod.rs"]
 mod physics_support;
 use physics_support::{ball_pile, mixed_pile};
@@ -184,7 +182,7 @@ fn run_rapier(scene: &Scene, steps: u64, mut observe: Observer) -> (f64, State, 
     (wall, first, last)
 }
 
-/// 512 balls of radius 0.3 m on a jittered lattice (1 m apart) in an 8 m box.
+/// The single-scene cases' ball box: [`physics_support::ball_box`] drawn with seed 23.
 fn ball_box(restitution: f32, friction: f32, gravity: bool) -> Scene {
     physics_support::ball_box(23, restitution, friction, gravity)
 }

@@ -69,12 +69,7 @@ pub(crate) struct PairManifold {
 /// Generalised inverse mass of `body` for a unit impulse along `n` at world offset `r`.
 pub(crate) fn inv_mass_at(body: &Body, rot: &crate::math::Quat, r: &Vec3, n: &Vec3) -> f32 {
     let rn = r.cross(n);
-    body.inv_mass + rn.dot(&inv_inertia_world(body, rot, &rn))
-}
-
-/// `I⁻¹ v` in world frame for a body with orientation `rot`.
-pub(crate) fn inv_inertia_world(body: &Body, rot: &crate::math::Quat, v: &Vec3) -> Vec3 {
-    body.world_inv_inertia_times(rot, v)
+    body.inv_mass + rn.dot(&body.world_inv_inertia_times(rot, &rn))
 }
 
 /// How far apart (surface to surface) a body may be from a partner at step `t` and still

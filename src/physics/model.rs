@@ -542,9 +542,6 @@ impl<'a> Candidate<'a> {
     }
 }
 
-/// Body `i`'s contact set for a pile contact with `j` (SPEC.md §5.3): the partner's inverse
-/// mass, restitution 0 (a resting contact does not bounce), and a position correction added
-/// whole.
 /// Inserts `set` into `sets` (ascending partner id, the static environment last) at its place.
 fn insert_by_partner(sets: &mut Vec<ContactSet>, set: ContactSet) {
     let partner = set.partner;
@@ -552,6 +549,9 @@ fn insert_by_partner(sets: &mut Vec<ContactSet>, set: ContactSet) {
     sets.insert(at, set);
 }
 
+/// Body `i`'s contact set for a pile contact with `j` (SPEC.md §5.3): the partner's inverse
+/// mass, restitution 0 (a resting contact does not bounce), and a position correction added
+/// whole.
 fn pile_contact(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
     resting_view(i, j, m, SetRole::Pile)
 }
@@ -788,18 +788,21 @@ impl CellModel for RigidBodyModel {
                 }
             }
             let mut next = solve_body(&start, &found.sets, self.gravity, self.dt, &self.params);
-            let mut at_end = start.clone();
-            at_end.linvel = next.linvel;
-            at_end.angvel = next.angvel;
-            let mut resolve = false;
-            for set in left_out {
-                if approaches(&at_end, &set) {
-                    insert_by_partner(&mut found.sets, set);
-                    resolve = true;
+            if !left_out.is_empty() {
+                // The start pose (the sets' points) with the end velocities.
+                let mut at_end = start.clone();
+                at_end.linvel = next.linvel;
+                at_end.angvel = next.angvel;
+                let mut resolve = false;
+                for set in left_out {
+                    if approaches(&at_end, &set) {
+                        insert_by_partner(&mut found.sets, set);
+                        resolve = true;
+                    }
                 }
-            }
-            if resolve {
-                next = solve_body(&start, &found.sets, self.gravity, self.dt, &self.params);
+                if resolve {
+                    next = solve_body(&start, &found.sets, self.gravity, self.dt, &self.params);
+                }
             }
             next.position += effect.dx;
             if effect.dtheta != Vec3::zeros() {

@@ -25,11 +25,6 @@ pub(crate) fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
     Quat::new_normalize(q.quaternion() + dq)
 }
 
-/// The world-frame inverse inertia of `body` at orientation `q` ([`Body::world_inv_inertia`]).
-fn inv_inertia_matrix(body: &Body, q: &Quat) -> Matrix3<f32> {
-    body.world_inv_inertia(q)
-}
-
 /// The frame of one pass: the orientation's matrix and the world inverse inertia.
 struct Frame {
     rot: Matrix3<f32>,
@@ -41,7 +36,7 @@ impl Frame {
     fn new(body: &Body, q: &Quat) -> Frame {
         Frame {
             rot: q.to_rotation_matrix().into_inner(),
-            inv_inertia: inv_inertia_matrix(body, q),
+            inv_inertia: body.world_inv_inertia(q),
             inv_mass: body.inv_mass,
         }
     }
@@ -88,9 +83,6 @@ struct ImpactRow {
     rn: Vec3,
     /// `I⁻¹ (r × n)`: the spin a unit normal impulse adds.
     irn: Vec3,
-    /// Generalised inverse mass along the normal, partner included, and its inverse.
-    w: f32,
-    inv_w: f32,
     /// Approach speed the gap allows within the substep, m/s.
     gap_speed: f32,
     /// A pile contact's split (SPEC.md §5.3): the share of the start's deficit the body
@@ -100,11 +92,11 @@ struct ImpactRow {
     /// substep's offset `r`), from which a pile contact's target is measured; unused for
     /// other sets.
     start_vn: f32,
-    /// Generalised inverse mass of the row's impulses: the body's own for a pile contact
-    /// (only this body moves in its solve), the pair's otherwise.
-    w_solve: f32,
-    /// `1 / w_solve`.
-    inv_w_solve: f32,
+    /// Generalised inverse mass along the normal of the row's impulses: the body's own for a
+    /// pile contact (only this body moves in its solve), partner included otherwise.
+    w: f32,
+    /// `1 / w`.
+    inv_w: f32,
 }
 
 /// Offset of contact point `cp` from the body's centre at orientation `rot` (a ball's is
@@ -255,19 +247,23 @@ pub(crate) fn solve_body(
     let mut engaged_sets = vec![false; sets.len()];
     let mut bounced_sets = vec![false; sets.len()];
     let rest_threshold = 2.0 * gravity.norm() * h;
-    // Each pile point's mobility along its normal (the normals are fixed for the step).
-    let mobilities: Vec<f32> = sets
-        .iter()
-        .flat_map(|set| {
-            set.points.iter().map(move |cp| {
-                if set.role == SetRole::Pile {
-                    mobility(sets, &cp.normal)
-                } else {
-                    1.0
-                }
+    // Each pile point's mobility along its normal (the normals are fixed for the step); read
+    // only at pile points, so left empty without a pile set.
+    let mobilities: Vec<f32> = if sets.iter().any(|s| s.role == SetRole::Pile) {
+        sets.iter()
+            .flat_map(|set| {
+                set.points.iter().map(move |cp| {
+                    if set.role == SetRole::Pile {
+                        mobility(sets, &cp.normal)
+                    } else {
+                        1.0
+                    }
+                })
             })
-        })
-        .collect();
+            .collect()
+    } else {
+        Vec::new()
+    };
 
     for _ in 0..n_sub {
         // Start of the substep: offsets, approach speeds (for restitution).
@@ -307,7 +303,7 @@ pub(crate) fn solve_body(
                 let irn = f0.inv_inertia * rn;
                 let w_own = f0.inv_mass + rn.dot(&irn);
                 let pile = set.role == SetRole::Pile;
-                let w_solve = if pile {
+                let w = if pile {
                     w_own
                 } else {
                     w_own + cp.partner_inv_mass
@@ -315,10 +311,8 @@ pub(crate) fn solve_body(
                 impact[k] = ImpactRow {
                     rn,
                     irn,
-                    w: w_own + cp.partner_inv_mass,
-                    inv_w: 1.0 / (w_own + cp.partner_inv_mass),
-                    w_solve,
-                    inv_w_solve: 1.0 / w_solve,
+                    w,
+                    inv_w: 1.0 / w,
                     gap_speed: gap0.max(0.0) / h,
                     share: if pile {
                         pile_share(mobilities[k], w_own, cp.partner_inv_mass)
@@ -358,13 +352,13 @@ pub(crate) fn solve_body(
                         target
                     };
                     let acc = scratch[k].impulse;
-                    let next = (acc + (target - vn) * row.inv_w_solve).max(0.0);
+                    let next = (acc + (target - vn) * row.inv_w).max(0.0);
                     if next != acc {
                         let d = next - acc;
                         b.linvel += cp.normal * (d * f0.inv_mass);
                         b.angvel += row.irn * d;
                         scratch[k].impulse = next;
-                        largest_change = largest_change.max(d.abs() * row.w_solve);
+                        largest_change = largest_change.max(d.abs() * row.w);
                     }
                     k += 1;
                 }
@@ -398,7 +392,9 @@ pub(crate) fn solve_body(
             {
                 continue;
             }
-            // The full compression impulses, on a copy of the velocities.
+            // The full compression impulses, on a copy of the velocities (only sets with
+            // restitution reach here: never a pile or carried set, so every row's `w` has the
+            // partner's inverse mass in it).
             let (mut v, mut w) = (b.linvel, b.angvel);
             let mut full: smallvec::SmallVec<[f32; 8]> =
                 scratch[range.clone()].iter().map(|sc| sc.impulse).collect();

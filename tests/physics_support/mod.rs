@@ -1,6 +1,6 @@
-//! Random settling piles (issue 23), shared by the physics-law tests (`tests/physics_laws.rs`)
-//! and the quality bench's settling sweep (`benches/quality.rs`), so that both measure the
-//! same scenes.
+//! Random settling scenes (issue 23): piles and ball gases, shared by the physics-law tests
+//! (`tests/physics_laws.rs`) and the quality bench (`benches/quality.rs`), so that both
+//! measure the same scenes.
 
 use soda::physics::{Material, Shape};
 use soda::scene::BodySpec;
