@@ -12,7 +12,7 @@
 //!    same seeded schedule for `cell`, `world` and `conservative`: cell computations,
 //!    re-executions, rollbacks, efficiency and wall time.
 //! 3. **Log memory** at window 64: `falling-cubes`, 8 worlds, `cell`, seeded schedule; bytes
-//!    held by the logs sampled along the run, bytes per body-step held, and by part (states,
+//!    held by the logs sampled every `TW_LOG_EVERY` steps (default 10) along the run and the most of them, bytes per body-step held, and by part (states,
 //!    outputs, ghost views, migrations in, inputs, messages received and sent, per-slot
 //!    headers).
 //!
@@ -225,8 +225,9 @@ fn log_memory() {
         std::mem::size_of::<soda::physics::Body>()
     );
     r.set_horizon(steps + 64);
-    let chunk = (steps / 8).max(1);
+    let chunk = env("TW_LOG_EVERY", 10, 2).min(steps).max(1);
     let mut done = 0;
+    let mut worst = 0f64;
     let t = Instant::now();
     while done < steps {
         r.run(chunk);
@@ -234,11 +235,13 @@ fn log_memory() {
         let held = r.steps_held();
         let b = r.log_breakdown();
         let bytes = b.total();
+        let per_body_step = bytes as f64 / (cubes as f64 * held as f64 / 8.0);
+        worst = worst.max(per_body_step);
         println!(
-            "  step {:6}: logs {:8.1} MiB over {held} world-steps = {:.0} B per body-step held (per-world steps held {:.1}, GVT {})",
+            "  step {:6}: logs {:8.1} MiB over {held} world-steps = {:.1} B per body-step held (per-world steps held {:.1}, GVT {})",
             r.committed_step(),
             bytes as f64 / (1 << 20) as f64,
-            bytes as f64 / (cubes as f64 * held as f64 / 8.0),
+            per_body_step,
             held as f64 / 8.0,
             r.gvt()
         );
@@ -255,6 +258,7 @@ fn log_memory() {
             per(b.slots)
         );
     }
+    println!("  most bytes per body-step held at a sample: {worst:.1}");
     let c = r.counters();
     println!(
         "  peak {:.1} MiB (sum of per-world peaks) = {:.0} B per body-step at a full window ({} bodies x 65 steps); {:.1} s",

@@ -376,15 +376,15 @@ impl ExactState for crate::physics::Body {
     fn to_words(&self, out: &mut Vec<u64>) {
         let f = |v: f32| u64::from(v.to_bits());
         out.push(self.id);
-        match self.shape {
+        match self.shape() {
             crate::physics::Shape::Ball { radius } => out.extend([0, f(radius), 0, 0]),
             crate::physics::Shape::Cuboid { half_extents: h } => {
                 out.extend([1, f(h[0]), f(h[1]), f(h[2])])
             }
         }
-        out.push(f(self.inv_mass));
-        out.extend(self.inv_inertia.iter().map(|&v| f(v)));
-        out.extend([f(self.friction), f(self.restitution)]);
+        out.push(f(self.inv_mass()));
+        out.extend(self.inv_inertia().iter().map(|&v| f(v)));
+        out.extend([f(self.friction()), f(self.restitution())]);
         out.extend(self.position.iter().map(|&v| f(v)));
         let q = self.rotation.quaternion();
         out.extend([f(q.w), f(q.i), f(q.j), f(q.k)]);
@@ -429,21 +429,16 @@ impl ExactState for crate::physics::Body {
         let support_depth = u32::try_from(words[25])
             .map_err(|_| StateDecodeError::BadValue("the support depth is not 32 bits".into()))?;
         let q = nalgebra::Quaternion::new(floats[12], floats[13], floats[14], floats[15]);
-        Ok(crate::physics::Body {
-            id: words[0],
-            shape,
-            inv_mass: floats[3],
-            inv_inertia: v3(4),
-            friction: floats[7],
-            restitution: floats[8],
-            position: v3(9),
-            // The bits written were a unit quaternion's: taken as they are, not renormalised.
-            rotation: Quat::new_unchecked(q),
-            linvel: v3(16),
-            angvel: v3(19),
-            rest_steps,
-            support_depth,
-        })
+        let props =
+            crate::physics::BodyProps::from_parts(shape, floats[3], v3(4), floats[7], floats[8]);
+        // The bits written were a unit quaternion's: taken as they are, not renormalised.
+        let mut body =
+            crate::physics::Body::with_props(words[0], props, v3(9), Quat::new_unchecked(q));
+        body.linvel = v3(16);
+        body.angvel = v3(19);
+        body.rest_steps = rest_steps;
+        body.support_depth = support_depth;
+        Ok(body)
     }
 }
 

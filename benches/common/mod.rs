@@ -31,7 +31,7 @@ impl PileBody {
     /// The measured part of a SODA body.
     pub fn from_soda(b: &Body) -> Self {
         PileBody {
-            shape: b.shape,
+            shape: b.shape(),
             position: b.position,
             rotation: b.rotation,
             linvel: b.linvel,

@@ -32,7 +32,7 @@ pub fn insert_body(world: &mut PhysicsWorld, b: &Body) -> RigidBodyHandle {
         ))
         .linvel(v(b.linvel))
         .angvel(v(b.angvel));
-    let shape = match b.shape {
+    let shape = match b.shape() {
         Shape::Cuboid { half_extents: e } => ColliderBuilder::cuboid(e[0], e[1], e[2]),
         Shape::Ball { radius } => ColliderBuilder::ball(radius),
     };
@@ -40,9 +40,9 @@ pub fn insert_body(world: &mut PhysicsWorld, b: &Body) -> RigidBodyHandle {
         .insert(
             rb,
             shape
-                .density(b.mass() / b.shape.volume())
-                .friction(b.friction)
-                .restitution(b.restitution),
+                .density(b.mass() / b.shape().volume())
+                .friction(b.friction())
+                .restitution(b.restitution()),
         )
         .0
 }
@@ -102,7 +102,7 @@ impl RapierWorld {
                 let rb = &self.world.bodies[hd];
                 let (t, q, lv) = (rb.translation(), *rb.rotation(), rb.linvel());
                 PileBody {
-                    shape: b.shape,
+                    shape: b.shape(),
                     position: soda::math::Vec3::new(t.x, t.y, t.z),
                     rotation: soda::math::Quat::from_quaternion(nalgebra::Quaternion::new(
                         q.w, q.x, q.y, q.z,

@@ -1,5 +1,6 @@
 //! A rigid body's shape, material and dynamic state.
 
+use super::props::{BodyProps, PropsId};
 use crate::math::{pose, Pose, Quat, Vec3};
 use crate::model::BodyId;
 use parry3d::shape::{Ball, Cuboid, Shape as ParryShape};
@@ -111,20 +112,16 @@ impl Default for Material {
 }
 
 /// A dynamic rigid body: identity, constant properties and the state at one step.
+///
+/// The constant properties (shape, inverse mass and inertia, friction, restitution) are
+/// interned ([`BodyProps::intern`]): the body holds their 4-byte handle, so a state is 72
+/// bytes instead of 112 and every copy, log entry and message carries only what moves.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Body {
     /// Unique id; the canonical order.
     pub id: BodyId,
-    /// Collision shape.
-    pub shape: Shape,
-    /// 1 / mass.
-    pub inv_mass: f32,
-    /// Inverse principal moments of inertia, body frame.
-    pub inv_inertia: Vec3,
-    /// Coulomb friction coefficient.
-    pub friction: f32,
-    /// Restitution coefficient.
-    pub restitution: f32,
+    /// The handle of the constant properties.
+    props: PropsId,
     /// Centre of mass, world frame.
     pub position: Vec3,
     /// Orientation.
@@ -155,15 +152,14 @@ impl Body {
         position: Vec3,
         rotation: Quat,
     ) -> Body {
-        let mass = material.density * shape.volume();
-        let inertia = shape.unit_inertia() * mass;
+        Body::with_props(id, BodyProps::new(shape, material), position, rotation)
+    }
+
+    /// A body at rest with the constant properties `props` (interned here).
+    pub fn with_props(id: BodyId, props: BodyProps, position: Vec3, rotation: Quat) -> Body {
         Body {
             id,
-            shape,
-            inv_mass: 1.0 / mass,
-            inv_inertia: inertia.map(|i| 1.0 / i),
-            friction: material.friction,
-            restitution: material.restitution,
+            props: props.intern(),
             position,
             rotation,
             linvel: Vec3::zeros(),
@@ -171,6 +167,54 @@ impl Body {
             rest_steps: 0,
             support_depth: 0,
         }
+    }
+
+    /// The constant properties.
+    #[inline]
+    pub fn props(&self) -> &'static BodyProps {
+        self.props.get()
+    }
+
+    /// The handle of the constant properties (equal exactly when the properties' bits are).
+    #[inline]
+    pub fn props_id(&self) -> PropsId {
+        self.props
+    }
+
+    /// Collision shape.
+    #[inline]
+    pub fn shape(&self) -> Shape {
+        self.props().shape()
+    }
+
+    /// 1 / mass.
+    #[inline]
+    pub fn inv_mass(&self) -> f32 {
+        self.props().inv_mass()
+    }
+
+    /// Inverse principal moments of inertia, body frame.
+    #[inline]
+    pub fn inv_inertia(&self) -> Vec3 {
+        self.props().inv_inertia()
+    }
+
+    /// Coulomb friction coefficient.
+    #[inline]
+    pub fn friction(&self) -> f32 {
+        self.props().friction()
+    }
+
+    /// Restitution coefficient.
+    #[inline]
+    pub fn restitution(&self) -> f32 {
+        self.props().restitution()
+    }
+
+    /// Radius of the smallest sphere about the centre that holds the shape.
+    #[inline]
+    pub fn bounding_radius(&self) -> f32 {
+        self.props().bounding_radius()
     }
 
     /// The body's pose.
@@ -182,7 +226,7 @@ impl Body {
     /// `|ω|·r <= speed` with `r` the bounding radius.
     pub fn is_quiet(&self, speed: f32) -> bool {
         self.linvel.norm_squared() <= speed * speed
-            && self.angvel.norm() * self.shape.bounding_radius() <= speed
+            && self.angvel.norm() * self.bounding_radius() <= speed
     }
 
     /// The world-frame inverse inertia at orientation `q`, `R · diag(I⁻¹) · Rᵀ`; exactly
@@ -191,8 +235,9 @@ impl Body {
     /// ball's tangential friction impulse spin it about the contact normal (1e-24 rad/s from
     /// rest), which torsional friction must then stop (SPEC.md §5.3).
     pub fn world_inv_inertia(&self, q: &Quat) -> nalgebra::Matrix3<f32> {
-        let d = self.inv_inertia;
-        if d.x == d.y && d.y == d.z {
+        let p = self.props();
+        let d = p.inv_inertia();
+        if p.isotropic() {
             return nalgebra::Matrix3::from_diagonal_element(d.x);
         }
         let r = q.to_rotation_matrix().into_inner();
@@ -202,8 +247,9 @@ impl Body {
     /// `I⁻¹ v` in world frame at orientation `q` (exactly `I⁻¹ v` for equal principal inverse
     /// inertias, as [`Body::world_inv_inertia`]).
     pub fn world_inv_inertia_times(&self, q: &Quat, v: &Vec3) -> Vec3 {
-        let d = self.inv_inertia;
-        if d.x == d.y && d.y == d.z {
+        let p = self.props();
+        let d = p.inv_inertia();
+        if p.isotropic() {
             return v * d.x;
         }
         let local = q.inverse_transform_vector(v);
@@ -212,13 +258,13 @@ impl Body {
 
     /// Mass in kg.
     pub fn mass(&self) -> f32 {
-        1.0 / self.inv_mass
+        1.0 / self.inv_mass()
     }
 
     /// Kinetic energy (translation + rotation), J.
     pub fn kinetic_energy(&self) -> f32 {
         let w = self.rotation.inverse() * self.angvel;
-        let rot: f32 = (0..3).map(|k| w[k] * w[k] / self.inv_inertia[k]).sum();
+        let rot: f32 = (0..3).map(|k| w[k] * w[k] / self.inv_inertia()[k]).sum();
         0.5 * self.mass() * self.linvel.norm_squared() + 0.5 * rot
     }
 }

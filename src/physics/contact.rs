@@ -69,7 +69,7 @@ pub(crate) struct PairManifold {
 /// Generalised inverse mass of `body` for a unit impulse along `n` at world offset `r`.
 pub(crate) fn inv_mass_at(body: &Body, rot: &crate::math::Quat, r: &Vec3, n: &Vec3) -> f32 {
     let rn = r.cross(n);
-    body.inv_mass + rn.dot(&body.world_inv_inertia_times(rot, &rn))
+    body.inv_mass() + rn.dot(&body.world_inv_inertia_times(rot, &rn))
 }
 
 /// How far apart (surface to surface) a body may be from a partner at step `t` and still
@@ -85,11 +85,10 @@ pub(crate) fn speculative_distance(
     cap: f32,
 ) -> f32 {
     let (vb, spin_b) = match b {
-        Some(b) => (b.linvel, b.angvel.norm() * b.shape.bounding_radius()),
+        Some(b) => (b.linvel, b.angvel.norm() * b.bounding_radius()),
         None => (Vec3::zeros(), 0.0),
     };
-    let closing =
-        (a.linvel - vb).norm() + a.angvel.norm() * a.shape.bounding_radius() + spin_b + g * dt;
+    let closing = (a.linvel - vb).norm() + a.angvel.norm() * a.bounding_radius() + spin_b + g * dt;
     (margin + closing * dt).min(cap)
 }
 
@@ -108,7 +107,7 @@ pub(crate) fn keep_distance(reach: f32, ra: f32, rb: f32, cap: f32) -> f32 {
 
 /// Whether two bodies' bounding spheres are within `distance` of each other.
 pub(crate) fn near(a: &Body, b: &Body, distance: f32) -> bool {
-    let reach = a.shape.bounding_radius() + b.shape.bounding_radius() + distance;
+    let reach = a.bounding_radius() + b.bounding_radius() + distance;
     (a.position - b.position).norm_squared() <= reach * reach
 }
 
@@ -119,7 +118,7 @@ pub(crate) fn pair_manifold(a: &Body, b: &Body, reach: f32, keep: f32) -> Option
     debug_assert!(a.id < b.id);
     let (pa, pb) = (a.pose(), b.pose());
     let pos12 = pa.inv_mul(&pb);
-    let (sa, sb) = (a.shape.parry(), b.shape.parry());
+    let (sa, sb) = (a.shape().parry(), b.shape().parry());
     let mut m: ContactManifold<(), ()> = ContactManifold::new();
     let keep = keep.max(reach);
     DefaultQueryDispatcher
@@ -159,8 +158,8 @@ pub(crate) fn view(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
         .collect();
     ContactSet {
         partner: Some(j.id),
-        friction: 0.5 * (i.friction + j.friction),
-        restitution: 0.5 * (i.restitution + j.restitution),
+        friction: 0.5 * (i.friction() + j.friction()),
+        restitution: 0.5 * (i.restitution() + j.restitution()),
         points,
         role: SetRole::Whole,
     }
@@ -183,13 +182,13 @@ pub(crate) fn environment_contacts(
         normal,
         partner_inv_mass: 0.0,
     };
-    let radius = i.shape.bounding_radius();
+    let radius = i.bounding_radius();
     for plane in &env.planes {
         let centre_gap = plane.normal.dot(&i.position) - plane.offset;
         if centre_gap > radius + reach {
             continue;
         }
-        match i.shape {
+        match i.shape() {
             Shape::Ball { radius } => {
                 let gap = centre_gap - radius;
                 if gap <= reach {
@@ -201,7 +200,7 @@ pub(crate) fn environment_contacts(
             }
             Shape::Cuboid { .. } => {
                 let mut near_plane: SmallVec<[(Vec3, Vec3, f32); 8]> = SmallVec::new();
-                for v in i.shape.vertices() {
+                for v in i.shape().vertices() {
                     let w = i.position + i.rotation * v;
                     let gap = plane.normal.dot(&w) - plane.offset;
                     if gap <= keep {
@@ -223,7 +222,7 @@ pub(crate) fn environment_contacts(
         }
         let pi = i.pose();
         let pos12 = pi.inv_mul(&c.pose);
-        let si = i.shape.parry();
+        let si = i.shape().parry();
         let sc = parry3d::shape::Cuboid::new(c.half_extents);
         let mut m: ContactManifold<(), ()> = ContactManifold::new();
         if DefaultQueryDispatcher
@@ -244,8 +243,8 @@ pub(crate) fn environment_contacts(
     }
     (!points.is_empty()).then(|| ContactSet {
         partner: None,
-        friction: 0.5 * (env.friction + i.friction),
-        restitution: 0.5 * (env.restitution + i.restitution),
+        friction: 0.5 * (env.friction + i.friction()),
+        restitution: 0.5 * (env.restitution + i.restitution()),
         points,
         role: SetRole::Whole,
     })

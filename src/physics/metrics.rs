@@ -32,10 +32,10 @@ pub fn max_speed<'a>(bodies: impl IntoIterator<Item = &'a Body>) -> f32 {
 pub fn environment_penetration(b: &Body, env: &Environment) -> f32 {
     let mut deepest = 0.0f32;
     for plane in &env.planes {
-        let lowest = match b.shape {
+        let lowest = match b.shape() {
             Shape::Ball { radius } => plane.normal.dot(&b.position) - radius,
             Shape::Cuboid { .. } => b
-                .shape
+                .shape()
                 .vertices()
                 .iter()
                 .map(|v| plane.normal.dot(&(b.position + b.rotation * v)))
@@ -45,7 +45,7 @@ pub fn environment_penetration(b: &Body, env: &Environment) -> f32 {
     }
     for c in &env.cuboids {
         let sc = parry3d::shape::Cuboid::new(c.half_extents);
-        let sb = b.shape.parry();
+        let sb = b.shape().parry();
         if let Ok(Some(ct)) = query::contact(&b.pose(), sb.as_dyn(), &c.pose, &sc, 0.0) {
             deepest = deepest.max(-ct.dist);
         }
@@ -58,7 +58,7 @@ pub fn pair_penetration(a: &Body, b: &Body) -> f32 {
     if !near(a, b, 0.0) {
         return 0.0;
     }
-    let (sa, sb) = (a.shape.parry(), b.shape.parry());
+    let (sa, sb) = (a.shape().parry(), b.shape().parry());
     match query::contact(&a.pose(), sa.as_dyn(), &b.pose(), sb.as_dyn(), 0.0) {
         Ok(Some(c)) => (-c.dist).max(0.0),
         _ => 0.0,

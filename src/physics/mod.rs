@@ -9,6 +9,7 @@ pub mod metrics;
 mod model;
 mod pair;
 mod params;
+mod props;
 mod solver;
 
 pub use body::{Body, Material, Shape};
@@ -17,3 +18,4 @@ pub use environment::{DomainBox, Environment, Plane, StaticCuboid};
 pub use event::EventKind;
 pub use model::RigidBodyModel;
 pub use params::SolverParams;
+pub use props::{BodyProps, PropsId};

@@ -168,7 +168,7 @@ impl RigidBodyModel {
         pairs.sort_unstable_by_key(|p| p.partner.id);
         carried.sort_unstable_by_key(|c: &(&Body, PairManifold)| c.0.id);
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
-        let radius = own.body.shape.bounding_radius();
+        let radius = own.body.bounding_radius();
         if let Some(env) = environment_contacts(
             own.body,
             &self.environment,
@@ -216,7 +216,7 @@ impl RigidBodyModel {
         let slack = self.filter_slack();
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
         let ahead = (2.0 * reach).min(cap);
-        let radius = own.body.shape.bounding_radius();
+        let radius = own.body.bounding_radius();
         if let Some(env) = environment_contacts(
             own.body,
             &self.environment,
@@ -248,12 +248,7 @@ impl RigidBodyModel {
             if !near(a, b, ahead) {
                 continue;
             }
-            let keep = keep_distance(
-                ahead,
-                a.shape.bounding_radius(),
-                b.shape.bounding_radius(),
-                cap,
-            );
+            let keep = keep_distance(ahead, a.bounding_radius(), b.bounding_radius(), cap);
             let Some(m) = pair_manifold(a, b, ahead, keep) else {
                 continue;
             };
@@ -277,8 +272,8 @@ impl RigidBodyModel {
             Err(pos) => {
                 let keep = keep_distance(
                     reach,
-                    a.shape.bounding_radius(),
-                    b.shape.bounding_radius(),
+                    a.bounding_radius(),
+                    b.bounding_radius(),
                     self.prediction(),
                 );
                 let m = pair_manifold(a, b, reach, keep);
@@ -294,8 +289,8 @@ impl RigidBodyModel {
             a,
             b,
             m,
-            0.5 * (a.friction + b.friction),
-            0.5 * (a.restitution + b.restitution),
+            0.5 * (a.friction() + b.friction()),
+            0.5 * (a.restitution() + b.restitution()),
             self.dt,
         )
     }
@@ -503,7 +498,7 @@ struct Candidate<'a> {
 
 impl<'a> Candidate<'a> {
     fn new(body: &'a Body, offset: [i32; 3], dt: f32, prediction: f32) -> Candidate<'a> {
-        let r = body.shape.bounding_radius();
+        let r = body.bounding_radius();
         let motion = dt * (body.linvel.norm() + body.angvel.norm() * r);
         let motion = motion.min(prediction);
         Candidate {
@@ -517,7 +512,7 @@ impl<'a> Candidate<'a> {
 
     /// Half extents of the world axis-aligned box around the shape.
     fn half_box(&self) -> Vec3 {
-        *self.half_box.get_or_init(|| match self.body.shape {
+        *self.half_box.get_or_init(|| match self.body.shape() {
             Shape::Ball { radius } => Vec3::repeat(radius),
             Shape::Cuboid { half_extents } => {
                 let m = self.body.rotation.to_rotation_matrix().into_inner().abs();
@@ -838,8 +833,8 @@ impl CellModel for RigidBodyModel {
         if self.can_reach(reader, other) {
             return true;
         }
-        let two = reader.shape.bounding_radius()
-            + other.shape.bounding_radius()
+        let two = reader.bounding_radius()
+            + other.bounding_radius()
             + 2.0 * (self.max_radius + self.prediction());
         (reader.position - other.position).norm_squared() <= two * two
     }
@@ -868,8 +863,8 @@ impl CellModel for RigidBodyModel {
         h.u32(b.support_depth);
     }
 
-    /// Bit equality of every field (a `Body` compares equal exactly when its fields do, and
-    /// every hashed field is an `f32`/`u32` compared here by its bits).
+    /// Bit equality of every field (every hashed field is an `f32`/`u32` compared here by
+    /// its bits; the constant properties by their handle, equal exactly when their bits are).
     fn same_bits(a: &Body, b: &Body) -> bool {
         let bits = |v: &Vec3| [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()];
         let quat = |b: &Body| {
@@ -883,11 +878,7 @@ impl CellModel for RigidBodyModel {
             && bits(&a.linvel) == bits(&b.linvel)
             && bits(&a.angvel) == bits(&b.angvel)
             && quat(a) == quat(b)
-            && a.inv_mass.to_bits() == b.inv_mass.to_bits()
-            && bits(&a.inv_inertia) == bits(&b.inv_inertia)
-            && a.friction.to_bits() == b.friction.to_bits()
-            && a.restitution.to_bits() == b.restitution.to_bits()
-            && a.shape == b.shape
+            && a.props_id() == b.props_id()
     }
 
     /// The body's position and the reach of the candidate filter of

@@ -102,7 +102,7 @@ impl Side {
     fn of(b: &Body) -> Side {
         Side {
             id: b.id,
-            inv_mass: b.inv_mass,
+            inv_mass: b.inv_mass(),
             inv_inertia: b.world_inv_inertia(&b.rotation),
             v: b.linvel,
             w: b.angvel,
@@ -161,8 +161,8 @@ impl PairContact {
             .local
             .iter()
             .map(|(la, lb)| {
-                let ra = contact_offset(&a.shape, &a.rotation, la, &n);
-                let rb = contact_offset(&b.shape, &b.rotation, lb, &-n);
+                let ra = contact_offset(&a.shape(), &a.rotation, la, &n);
+                let rb = contact_offset(&b.shape(), &b.rotation, lb, &-n);
                 let gap = n.dot(&((b.position + rb) - (a.position + ra)));
                 let mut p = PairPoint {
                     ra,

@@ -37,7 +37,7 @@ impl Frame {
         Frame {
             rot: q.to_rotation_matrix().into_inner(),
             inv_inertia: body.world_inv_inertia(q),
-            inv_mass: body.inv_mass,
+            inv_mass: body.inv_mass(),
         }
     }
 
@@ -102,7 +102,7 @@ struct ImpactRow {
 /// Offset of contact point `cp` from the body's centre at orientation `rot` (a ball's is
 /// along the normal whatever its orientation: a normal force on a ball has no torque).
 fn offset(body: &Body, rot: &Matrix3<f32>, cp: &ContactPoint) -> Vec3 {
-    match body.shape {
+    match body.shape() {
         Shape::Ball { radius } => -cp.normal * radius,
         Shape::Cuboid { .. } => rot * cp.anchor,
     }
@@ -128,11 +128,10 @@ fn cancelling_spin(body: &Body, q: &Quat, w: &Vec3, dw: &Vec3, allowance: f32) -
     if len == 0.0 {
         return Vec3::zeros();
     }
+    let d = body.inv_inertia();
     let inertia = |a: &Vec3, b: &Vec3| {
         let (la, lb) = (q.inverse_transform_vector(a), q.inverse_transform_vector(b));
-        (0..3)
-            .map(|k| la[k] * lb[k] / body.inv_inertia[k])
-            .sum::<f32>()
+        (0..3).map(|k| la[k] * lb[k] / d[k]).sum::<f32>()
     };
     let dd = inertia(dw, dw);
     let s = if dd > 0.0 {
@@ -531,7 +530,7 @@ pub(crate) fn solve_body(
             &q1,
             &w_pred,
             &(dtheta / h),
-            p.max_separation_speed / body.shape.bounding_radius(),
+            p.max_separation_speed / body.bounding_radius(),
         );
         b.position = x1;
         b.rotation = q1;

@@ -307,12 +307,12 @@ impl InputScript {
 pub fn push(impulse: Vec3, angular: Vec3) -> Edit<Body> {
     Edit::new(move |b: &Body| {
         let mut b = b.clone();
-        b.linvel += impulse * b.inv_mass;
+        b.linvel += impulse * b.inv_mass();
         // I⁻¹ L in the world frame: the body-frame inverse inertia, rotated.
         let local = b.rotation.inverse_transform_vector(&angular);
         b.angvel += b
             .rotation
-            .transform_vector(&local.component_mul(&b.inv_inertia));
+            .transform_vector(&local.component_mul(&b.inv_inertia()));
         b.rest_steps = 0;
         b
     })

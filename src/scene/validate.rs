@@ -325,18 +325,13 @@ fn check_body(
     // Mass and inertia derived in f32 must be finite and non-zero: a radius of 1e-38 m
     // passes the checks above but its inertia underflows, and the solver would turn the
     // infinite inverse into NaN (a hard error at the first step, SPEC.md §5.3).
-    let probe = crate::physics::Body::new(
-        b.id,
-        b.shape,
-        b.material,
-        nalgebra::Vector3::zeros(),
-        nalgebra::UnitQuaternion::identity(),
-    );
+    // (Computed without interning: a rejected body leaves nothing in the table.)
+    let probe = crate::physics::BodyProps::new(b.shape, b.material);
     let inverse = [
-        probe.inv_mass,
-        probe.inv_inertia.x,
-        probe.inv_inertia.y,
-        probe.inv_inertia.z,
+        probe.inv_mass(),
+        probe.inv_inertia().x,
+        probe.inv_inertia().y,
+        probe.inv_inertia().z,
     ];
     if !inverse.iter().all(|v| v.is_finite() && *v > 0.0) {
         return Err(c.fail(

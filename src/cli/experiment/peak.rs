@@ -75,10 +75,10 @@ fn parry_shape(s: &Shape) -> Box<dyn ParryShape> {
 /// Whether `b` is within the tolerance of a static plane (ground, walls, ceiling).
 fn touches_planes(b: &Body, model: &RigidBodyModel) -> bool {
     model.environment.planes.iter().any(|p| {
-        let lowest = match b.shape {
+        let lowest = match b.shape() {
             Shape::Ball { radius } => p.normal.dot(&b.position) - radius,
             Shape::Cuboid { .. } => b
-                .shape
+                .shape()
                 .vertices()
                 .iter()
                 .map(|v| p.normal.dot(&(b.position + b.rotation * v)))
@@ -94,7 +94,7 @@ fn touches_planes(b: &Body, model: &RigidBodyModel) -> bool {
 /// plane. Also returns whether a cube touches anything.
 fn collisions(state: &CellStates<Body>, grid: &Grid, model: &RigidBodyModel) -> (u64, bool) {
     let (mut count, mut cube) = (0u64, false);
-    let is_cube = |b: &Body| matches!(b.shape, Shape::Cuboid { .. });
+    let is_cube = |b: &Body| matches!(b.shape(), Shape::Cuboid { .. });
     for i in state.occupied() {
         let nb = state.neighbourhood(grid, grid.coord(i));
         for a in nb.own() {
@@ -106,12 +106,11 @@ fn collisions(state: &CellStates<Body>, grid: &Grid, model: &RigidBodyModel) -> 
                 if model.is_asleep(a) && model.is_asleep(b) {
                     continue;
                 }
-                let reach =
-                    a.shape.bounding_radius() + b.shape.bounding_radius() + CONTACT_TOLERANCE;
+                let reach = a.bounding_radius() + b.bounding_radius() + CONTACT_TOLERANCE;
                 if (a.position - b.position).norm_squared() > reach * reach {
                     continue;
                 }
-                let (sa, sb) = (parry_shape(&a.shape), parry_shape(&b.shape));
+                let (sa, sb) = (parry_shape(&a.shape()), parry_shape(&b.shape()));
                 let hit = query::contact(&a.pose(), &*sa, &b.pose(), &*sb, CONTACT_TOLERANCE);
                 if matches!(hit, Ok(Some(_))) {
                     count += 1;

@@ -183,7 +183,7 @@ impl InputDesk {
                 speed,
             } => {
                 let body = find(id)?;
-                if body.inv_mass == 0.0 {
+                if body.inv_mass() == 0.0 {
                     return Err(format!("body {id} has infinite mass and cannot be pushed"));
                 }
                 let d = soda::math::Vec3::from(direction);
@@ -194,7 +194,7 @@ impl InputDesk {
                     ));
                 }
                 let speed = speed.min(self.scene.solver.max_speed);
-                let impulse = d / n * (speed / body.inv_mass);
+                let impulse = d / n * (speed / body.inv_mass());
                 entry.id = Some(id);
                 entry.impulse = Some(impulse.into());
                 id

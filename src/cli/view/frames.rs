@@ -159,7 +159,7 @@ pub fn encode(step: u64, hash: u64, bodies: &[&Body], grid: &Grid, look: &Look) 
         b.extend_from_slice(&(body.id as u32).to_le_bytes());
         b.extend_from_slice(&((body.id >> 32) as u32).to_le_bytes());
         b.extend_from_slice(&world.to_le_bytes());
-        let (kind, size) = match body.shape {
+        let (kind, size) = match body.shape() {
             Shape::Ball { radius } => (0u8, [radius; 3]),
             Shape::Cuboid { half_extents } => (1u8, half_extents),
         };

@@ -14,7 +14,7 @@ use std::ops::{Index, IndexMut};
 use std::sync::Arc;
 
 /// Entries per chunk.
-pub(super) const CHUNK: usize = 32;
+pub(super) const CHUNK: usize = 16;
 
 /// A key of a [`Chunked`] table: its position.
 pub(super) trait Position: Copy {
