@@ -12,7 +12,8 @@
 //!    same seeded schedule for `cell`, `world` and `conservative`: cell computations,
 //!    re-executions, rollbacks, efficiency and wall time.
 //! 3. **Log memory** at window 64: `falling-cubes`, 8 worlds, `cell`, seeded schedule; bytes
-//!    held by the logs sampled every `TW_LOG_EVERY` steps (default 10) along the run and the most of them, bytes per body-step held, and by part (states,
+//!    held by the logs sampled every `TW_LOG_EVERY` steps (default 10) along the run and the
+//!    most of them, bytes per body-step held, and by part (states,
 //!    outputs, ghost views, migrations in, inputs, messages received and sent, per-slot
 //!    headers).
 //!

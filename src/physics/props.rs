@@ -161,13 +161,16 @@ impl PropsId {
     /// The properties this handle stands for.
     #[inline]
     pub fn get(self) -> &'static BodyProps {
-        // SAFETY: `get_unchecked` needs the entry at this index to be initialised. A
-        // `PropsId` is made only by `intern`, from the index `TABLE.push` returned, and `push`
-        // writes the entry (and marks it active, a release store) before returning; the
-        // table never removes an entry. A thread holding this handle either made it or
-        // received it (inside a body) through something that synchronises — a channel, a
-        // lock, a thread spawn or join; safe Rust has no other way to move a value between
-        // threads — so the entry's write happens before this read. Tested by
+        // SAFETY: `get_unchecked` needs the entry at this index (and its bucket) to be
+        // initialised. A `PropsId` is made only by `intern` (its field is private; no
+        // `Default`, no deserialiser), from the index `TABLE.push` returned while `INDEX`'s
+        // lock was held, and `push` allocates the bucket and writes the entry before
+        // returning; the table never removes an entry and a bucket pointer, once set, never
+        // changes. A thread holding the handle made it, found it under the same lock (whose
+        // acquire orders the entry's write before this read), or received it inside a body
+        // through something that synchronises — a channel, a lock, a thread spawn or join;
+        // safe Rust has no other way to move a value between threads — so the bucket
+        // pointer's and the entry's writes happen before these reads. Tested by
         // `interning_from_many_threads_gives_one_handle_per_kind` (handles read on threads
         // other than the one that pushed the entry).
         unsafe { TABLE.get_unchecked(self.0 as usize) }
@@ -209,6 +212,28 @@ mod tests {
             "-0.0 and +0.0 differ in bits"
         );
         assert!(PropsId::interned() >= 3);
+    }
+
+    #[test]
+    fn a_body_state_is_72_bytes_and_keeps_its_properties() {
+        // What every step copies, logs and sends per body (SPEC.md §5.1): id, handle,
+        // position, orientation, both velocities and two counters.
+        assert_eq!(std::mem::size_of::<crate::physics::Body>(), 72);
+        let m = Material {
+            density: 2.0,
+            friction: 0.3,
+            restitution: 0.2,
+        };
+        let shape = Shape::Cuboid {
+            half_extents: [0.5, 0.25, 1.0],
+        };
+        let b = crate::physics::Body::new(7, shape, m, Vec3::zeros(), Default::default());
+        assert_eq!(b.shape(), shape);
+        assert_eq!(b.inv_mass(), 1.0 / (2.0 * shape.volume()));
+        assert_eq!((b.friction(), b.restitution()), (0.3, 0.2));
+        assert_eq!(b.bounding_radius(), shape.bounding_radius());
+        assert!(!b.props().isotropic());
+        assert_eq!(b.props_id(), BodyProps::new(shape, m).intern());
     }
 
     #[test]

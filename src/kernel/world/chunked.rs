@@ -173,7 +173,7 @@ mod tests {
         let c: Chunked<OwnCell, Option<u32>> = Chunked::from_vec((0..70).map(Some).collect());
         assert!(a.all_same(&c, |x, y| x == y));
         assert!(!a.all_same(&b, |x, y| x == y));
-        // Chunks 0 and 2 are still shared, chunk 1 is not.
+        // The chunk holding entry 33 was copied (entry 40 shares it); the others are shared.
         let shared: Vec<usize> = b.iter_shared().map(|(_, n)| n).collect();
         assert_eq!(shared[0], 2);
         assert_eq!(shared[40], 1);
