@@ -112,7 +112,7 @@ pub struct Message<S> {
     /// of a copy (SPEC.md §K3). `None` otherwise (and after crossing processes: the
     /// receiver copies `bodies`). Not part of the message's identity or content: equality
     /// ignores it.
-    pub view: Option<Arc<[S]>>,
+    pub view: Option<crate::kernel::SharedStates<S>>,
 }
 
 impl<S: PartialEq> PartialEq for Message<S> {

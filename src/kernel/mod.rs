@@ -24,6 +24,7 @@ pub mod counters;
 pub mod gvt;
 pub mod message;
 pub mod partition;
+pub mod shared_states;
 pub mod synthetic;
 pub mod trace;
 pub mod world;
@@ -36,5 +37,6 @@ pub use config::{
 pub use counters::{BalanceCounters, Counters, WorldCounters};
 pub use message::{Edit, EntityEdit, Homed, Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
+pub use shared_states::SharedStates;
 pub use trace::{RunTrace, WorldTrace};
 pub use world::{LogBytes, World};

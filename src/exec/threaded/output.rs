@@ -10,7 +10,6 @@ use crate::frame::{Event, Frame, StatesWanted};
 use crate::kernel::trace::GvtSample;
 use crate::model::{CellModel, Step};
 use std::collections::{BTreeMap, VecDeque};
-use std::sync::Arc;
 
 /// Committed steps being assembled from the worlds' contributions.
 pub(super) struct Assembly<M: CellModel> {
@@ -25,7 +24,7 @@ pub(super) struct Partial<M: CellModel> {
     /// How many worlds contributed.
     pub(super) worlds: usize,
     /// The contributing worlds' cells' states (any order), shared with their logs.
-    pub(super) states: Vec<Arc<[M::State]>>,
+    pub(super) states: Vec<crate::kernel::SharedStates<M::State>>,
     /// The events of their cells' computations of the step before.
     pub(super) events: Vec<Event<M::Event>>,
     /// Whether every contributing world's cells hold the allocations of the step before

@@ -9,6 +9,7 @@ use super::territory::Nb;
 use super::World;
 use crate::frame::Event;
 use crate::kernel::message::{Bodies, EntityEdit, Homed};
+use crate::kernel::SharedStates;
 use crate::model::{BodyId, CellModel, Step};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -16,7 +17,7 @@ use std::sync::Arc;
 /// Id-sorted states in one shared allocation (`None`: empty, nothing allocated). A cell's
 /// output and its state at the next step are the same allocation when every body stays in
 /// the cell and nothing else lands there — the common case, which then copies nothing.
-pub(super) type Shared<S> = Option<Arc<[S]>>;
+pub(super) type Shared<S> = Option<SharedStates<S>>;
 
 /// The states of `s` as a slice.
 pub(super) fn view<S>(s: &Shared<S>) -> &[S] {
@@ -25,7 +26,7 @@ pub(super) fn view<S>(s: &Shared<S>) -> &[S] {
 
 /// `v` as shared states (`None` when empty).
 pub(super) fn share<S>(v: Vec<S>) -> Shared<S> {
-    (!v.is_empty()).then(|| Arc::from(v))
+    (!v.is_empty()).then(|| SharedStates::from_vec(v))
 }
 
 /// The output of one cell computation: the bodies it homes at the next step, sorted by
@@ -326,7 +327,7 @@ impl<S: Clone, E: Clone> Slot<S, E> {
         };
         // Each holder of a shared allocation counts its share; an entry of a chunk shared
         // by `n` slots is held once by all of them.
-        let held = |a: &Arc<[S]>| (16 + a.len() * s) / Arc::strong_count(a);
+        let held = |a: &SharedStates<S>| a.allocation_bytes() / SharedStates::strong_count(a);
         let per_chunk = |(e, n): (&Shared<S>, usize)| e.as_ref().map_or(0, held) / n;
         b.states += self.states.iter_shared().map(per_chunk).sum::<usize>() as u64;
         for (o, n) in self.outs.iter_shared() {
@@ -432,7 +433,7 @@ impl<M: CellModel> World<M> {
 
     /// Its own cells' states at step `t` (the non-empty cells, any order), shared with the
     /// log rather than copied: for handing committed states to another thread.
-    pub fn shared_states_at(&self, t: Step) -> impl Iterator<Item = Arc<[M::State]>> + '_ {
+    pub fn shared_states_at(&self, t: Step) -> impl Iterator<Item = SharedStates<M::State>> + '_ {
         self.slot(t)
             .into_iter()
             .flat_map(|s| s.states.iter().flatten().cloned())
@@ -557,7 +558,7 @@ impl<M: CellModel> World<M> {
 pub(super) fn same_allocation<S>(a: &Shared<S>, b: &Shared<S>) -> bool {
     match (a, b) {
         (None, None) => true,
-        (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+        (Some(a), Some(b)) => SharedStates::ptr_eq(a, b),
         _ => false,
     }
 }

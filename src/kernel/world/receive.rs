@@ -5,6 +5,7 @@ use super::index::OwnCell;
 use super::keys::{MigrationIn, RecvKey};
 use super::log::{view, Carried, Shared, Version};
 use super::World;
+use crate::kernel::SharedStates;
 use crate::kernel::config::RollbackMode;
 use crate::kernel::message::{Bodies, Message, MessageKind, Sign};
 use crate::model::{CellModel, Step};
@@ -192,10 +193,7 @@ impl<M: CellModel> World<M> {
         match msg.view {
             Some(v) if v.len() == msg.bodies.len() => Some(v),
             _ => Some(
-                Arc::unwrap_or_clone(msg.bodies)
-                    .into_iter()
-                    .map(|h| h.state)
-                    .collect(),
+                SharedStates::from_exact(Arc::unwrap_or_clone(msg.bodies).into_iter().map(|h| h.state)),
             ),
         }
     }
@@ -233,7 +231,7 @@ impl<M: CellModel> World<M> {
             let old = std::mem::replace(&mut slot.ghosts[m], view.clone());
             let unchanged = match (&old, &view) {
                 (None, None) => true,
-                (Some(a), Some(b)) => Arc::ptr_eq(a, b) || Self::same_states(a, b),
+                (Some(a), Some(b)) => SharedStates::ptr_eq(a, b) || Self::same_states(a, b),
                 _ => false,
             };
             // An unchanged step does not end the walk: the steps after a ghost that

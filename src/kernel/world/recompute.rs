@@ -7,6 +7,7 @@ use super::index::{cells_around, OwnCell, PerOwnCell};
 use super::keys::MigrationIn;
 use super::log::{same_allocation, share, view, Out, Shared};
 use super::World;
+use crate::kernel::SharedStates;
 use crate::frame::{Event, LeftGrid};
 use crate::kernel::config::{PlantedBug, RollbackMode};
 use crate::kernel::message::{EntityEdit, Homed, Message};
@@ -105,7 +106,8 @@ impl<M: CellModel> World<M> {
                 return Out::new(cell, bodies, Vec::new(), events, true);
             }
             // The common case: one allocation, written once, shared with the next state.
-            let bodies = (!self.scratch.is_empty()).then(|| self.scratch.drain(..).collect());
+            let bodies = (!self.scratch.is_empty())
+                .then(|| SharedStates::from_exact(self.scratch.drain(..)));
             return Out::new(cell, bodies, Vec::new(), events, true);
         }
         // Sorted by (home cell, id), without the bodies that left the domain.
@@ -117,7 +119,7 @@ impl<M: CellModel> World<M> {
             out_homes.clear();
         }
         let bodies =
-            (!order.is_empty()).then(|| order.iter().map(|&k| scratch[k].clone()).collect());
+            (!order.is_empty()).then(|| SharedStates::from_exact(order.iter().map(|&k| scratch[k].clone())));
         self.scratch.clear();
         Out::new(cell, bodies, out_homes, events, true)
     }
