@@ -61,7 +61,7 @@ fn main() {
                 .iter()
                 .filter(|b| {
                     std::env::var("ONLY")
-                        .map(|o| o.split(',').any(|x| x.parse::<u64>().ok() == Some(b.id)))
+                        .map(|o| o.split(',').any(|x| x.parse::<u64>().ok() == Some(b.id())))
                         .unwrap_or(true)
                 })
                 .map(|b| {

@@ -48,14 +48,14 @@ fn main() {
                 .unwrap();
             eprintln!(
                 "   fastest id={} p={:?} v={:?} w={:?}",
-                f.id,
+                f.id(),
                 f.position.as_slice(),
                 f.linvel.as_slice(),
                 f.angvel.as_slice()
             );
             let asleep = all
                 .iter()
-                .filter(|b| sleep_steps > 0 && b.rest_steps >= sleep_steps)
+                .filter(|b| sleep_steps > 0 && u32::from(b.rest_steps) >= sleep_steps)
                 .count();
             println!("t={:5.1}s asleep={asleep} bodies={} ke={:.3} vmax={:.3} pen={:.4} ymin={:.3} ymax={:.3} wall={:.2}s", (s + 1) as f32 / 60.0, r.bodies, r.kinetic_energy, r.max_speed, r.max_penetration, r.min_height, r.max_height, t.elapsed().as_secs_f32());
         }

@@ -375,7 +375,7 @@ fn finite_f32(w: &[u64], k: usize) -> Result<f32, StateDecodeError> {
 impl ExactState for crate::physics::Body {
     fn to_words(&self, out: &mut Vec<u64>) {
         let f = |v: f32| u64::from(v.to_bits());
-        out.push(self.id);
+        out.push(self.id());
         match self.shape() {
             crate::physics::Shape::Ball { radius } => out.extend([0, f(radius), 0, 0]),
             crate::physics::Shape::Cuboid { half_extents: h } => {
@@ -424,10 +424,12 @@ impl ExactState for crate::physics::Body {
                 )))
             }
         };
-        let rest_steps = u32::try_from(words[24])
-            .map_err(|_| StateDecodeError::BadValue("the rest-step count is not 32 bits".into()))?;
-        let support_depth = u32::try_from(words[25])
-            .map_err(|_| StateDecodeError::BadValue("the support depth is not 32 bits".into()))?;
+        let rest_steps = u16::try_from(words[24]).map_err(|_| {
+            StateDecodeError::BadValue("the rest-step count is more than 65535".into())
+        })?;
+        let support_depth = u16::try_from(words[25]).map_err(|_| {
+            StateDecodeError::BadValue("the support depth is more than 65535".into())
+        })?;
         let q = nalgebra::Quaternion::new(floats[12], floats[13], floats[14], floats[15]);
         let props =
             crate::physics::BodyProps::from_parts(shape, floats[3], v3(4), floats[7], floats[8]);
@@ -449,7 +451,7 @@ mod tests {
     use crate::physics::{Body, Material, RigidBodyModel, Shape};
     use proptest::prelude::*;
 
-    fn body(id: u64, ball: bool, f: [f32; 12], rest_steps: u32) -> Body {
+    fn body(id: u64, ball: bool, f: [f32; 12], rest_steps: u16) -> Body {
         let shape = if ball {
             Shape::Ball {
                 radius: f[0].abs() + 0.01,
@@ -480,8 +482,8 @@ mod tests {
             id in any::<u64>(),
             ball in any::<bool>(),
             f in prop::array::uniform12(-50.0f32..50.0),
-            rest_steps in any::<u32>(),
-            support_depth in any::<u32>(),
+            rest_steps in any::<u16>(),
+            support_depth in any::<u16>(),
         ) {
             let mut b = body(id, ball, f, rest_steps);
             b.support_depth = support_depth;
@@ -499,7 +501,7 @@ mod tests {
     fn checkpoint_text_reads_back_with_its_states_and_hash() {
         let bodies: Vec<Body> = (0..20)
             .rev()
-            .map(|i| body(i * 7, i % 2 == 0, [0.3 + i as f32 * 0.01; 12], i as u32))
+            .map(|i| body(i * 7, i % 2 == 0, [0.3 + i as f32 * 0.01; 12], i as u16))
             .collect();
         let refs: Vec<&Body> = bodies.iter().collect();
         let c = Checkpoint::new::<RigidBodyModel>("rigid-bodies", 42, &refs, "run".to_string());
@@ -509,7 +511,7 @@ mod tests {
         assert_eq!(back.run, "run");
         let states = back.states::<RigidBodyModel>().unwrap();
         let mut sorted = bodies.clone();
-        sorted.sort_by_key(|b| b.id);
+        sorted.sort_by_key(|b| b.id());
         assert_eq!(states, sorted);
         assert_eq!(
             Checkpoint::<String>::from_text(&text, "epidemic").unwrap_err(),

@@ -777,11 +777,11 @@ mod tests {
         for b in bodies {
             match grid.cell_of(b.position.into()) {
                 Some(c) => cells[grid.index(c)].push(b.clone()),
-                None => outside.push(b.id),
+                None => outside.push(b.id()),
             }
         }
         for c in &mut cells {
-            c.sort_by_key(|b| b.id);
+            c.sort_by_key(|b| b.id());
         }
         (cells, outside)
     }

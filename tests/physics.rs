@@ -246,7 +246,7 @@ fn body_bits(b: &soda::Body) -> Vec<u32> {
         .flat_map(|x| x.iter().map(|c| c.to_bits()))
         .collect();
     v.extend([q.w, q.i, q.j, q.k].iter().map(|c| c.to_bits()));
-    v.push(b.rest_steps);
+    v.push(u32::from(b.rest_steps));
     v
 }
 
@@ -268,7 +268,7 @@ fn sleeping_body_keeps_its_bits() {
     let mut asleep_at = None;
     for step in 1..=600u32 {
         sim.step();
-        if only_body(&sim).rest_steps >= n {
+        if u32::from(only_body(&sim).rest_steps) >= n {
             asleep_at = Some(step);
             break;
         }
@@ -306,7 +306,7 @@ fn a_falling_body_wakes_a_sleeping_one_and_both_come_to_rest() {
     for _ in 0..400 {
         sim.step();
         let all = sim.state().sorted::<RigidBodyModel>();
-        if all[0].rest_steps >= n {
+        if u32::from(all[0].rest_steps) >= n {
             lower_slept = true;
         } else if lower_slept {
             lower_woke = true;
@@ -316,7 +316,7 @@ fn a_falling_body_wakes_a_sleeping_one_and_both_come_to_rest() {
     assert!(lower_woke, "the falling cube did not wake the lower one");
     let all = sim.state().sorted::<RigidBodyModel>();
     assert!(
-        all.iter().all(|b| b.rest_steps >= n),
+        all.iter().all(|b| u32::from(b.rest_steps) >= n),
         "not both asleep at the end"
     );
     assert!(

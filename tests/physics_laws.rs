@@ -701,7 +701,7 @@ fn a_ball_pile_carries_its_weight_without_sinking_into_itself() {
             for c in &bs[i + 1..] {
                 let d = soda::physics::metrics::pair_penetration(a, c);
                 if d > worst.0 {
-                    worst = (d, a.id, c.id);
+                    worst = (d, a.id(), c.id());
                 }
             }
         }
@@ -732,7 +732,10 @@ fn a_pile_of_balls_and_boxes_comes_to_rest() {
         }
         let bs = bodies(&sim);
         assert_eq!(bs.len(), 150, "seed {seed}: bodies lost");
-        let asleep = bs.iter().filter(|b| b.rest_steps >= sleep_steps).count();
+        let asleep = bs
+            .iter()
+            .filter(|b| u32::from(b.rest_steps) >= sleep_steps)
+            .count();
         let energy = soda::physics::metrics::kinetic_energy(bs.iter());
         assert!(
             asleep * 100 >= 95 * bs.len(),
@@ -795,15 +798,17 @@ fn ball_gases_that_never_came_to_rest_are_asleep_within_15_s() {
         let mut sim = Simulation::new(scene);
         let asleep = (1..=900u32).find(|_| {
             sim.step();
-            bodies(&sim).iter().all(|b| b.rest_steps >= sleep_steps)
+            bodies(&sim)
+                .iter()
+                .all(|b| u32::from(b.rest_steps) >= sleep_steps)
         });
         assert!(
             asleep.is_some(),
             "seed {seed}: balls still awake after 900 steps: {:?}",
             bodies(&sim)
                 .iter()
-                .filter(|b| b.rest_steps < sleep_steps)
-                .map(|b| b.id)
+                .filter(|b| u32::from(b.rest_steps) < sleep_steps)
+                .map(|b| b.id())
                 .collect::<Vec<_>>()
         );
     }

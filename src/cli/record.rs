@@ -119,7 +119,20 @@ fn write_row(out: &mut impl Write, step: u64, b: &Body) -> std::io::Result<()> {
     writeln!(
         out,
         "{step},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
-        b.id, p.x, p.y, p.z, q.w, q.i, q.j, q.k, v.x, v.y, v.z, w.x, w.y, w.z
+        b.id(),
+        p.x,
+        p.y,
+        p.z,
+        q.w,
+        q.i,
+        q.j,
+        q.k,
+        v.x,
+        v.y,
+        v.z,
+        w.x,
+        w.y,
+        w.z
     )
 }
 

@@ -354,7 +354,7 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
             inside
         }
     };
-    initial.sort_by_key(|b| b.id);
+    initial.sort_by_key(|b| b.id());
     let initial_bodies = match &from {
         Some(f) => f.bodies.len(),
         None => scene.bodies.len(),

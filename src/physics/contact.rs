@@ -115,7 +115,7 @@ pub(crate) fn near(a: &Body, b: &Body, distance: f32) -> bool {
 /// lies within `reach`. When some point does, every point within `keep` (≥ `reach`) is
 /// kept, so a tilted face lands on all its corners, not only on those already within reach.
 pub(crate) fn pair_manifold(a: &Body, b: &Body, reach: f32, keep: f32) -> Option<PairManifold> {
-    debug_assert!(a.id < b.id);
+    debug_assert!(a.id() < b.id());
     let (pa, pb) = (a.pose(), b.pose());
     let pos12 = pa.inv_mul(&pb);
     let (sa, sb) = (a.shape().parry(), b.shape().parry());
@@ -139,7 +139,7 @@ pub(crate) fn pair_manifold(a: &Body, b: &Body, reach: f32, keep: f32) -> Option
 
 /// Body `i`'s view of a pair manifold with partner `j`.
 pub(crate) fn view(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
-    let i_is_a = i.id < j.id;
+    let i_is_a = i.id() < j.id();
     let normal = if i_is_a { -m.normal_ab } else { m.normal_ab };
     let points = m
         .local
@@ -157,7 +157,7 @@ pub(crate) fn view(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
         })
         .collect();
     ContactSet {
-        partner: Some(j.id),
+        partner: Some(j.id()),
         friction: 0.5 * (i.friction() + j.friction()),
         restitution: 0.5 * (i.restitution() + j.restitution()),
         points,

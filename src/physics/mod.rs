@@ -17,5 +17,5 @@ pub use contact::{ContactPoint, ContactSet, SetRole};
 pub use environment::{DomainBox, Environment, Plane, StaticCuboid};
 pub use event::EventKind;
 pub use model::RigidBodyModel;
-pub use params::SolverParams;
+pub use params::{SolverParams, MAX_SLEEP_STEPS};
 pub use props::{BodyProps, PropsId};

@@ -8,7 +8,7 @@ use super::contact::{
 use super::environment::{DomainBox, Environment};
 use super::event::EventKind;
 use super::pair::{Edge, PairContact, PairEffect};
-use super::params::SolverParams;
+use super::params::{SolverParams, MAX_SLEEP_STEPS};
 use super::solver::{approaches, integrate_rotation, solve_body};
 use crate::frame::Event;
 use crate::grid::Grid;
@@ -108,7 +108,7 @@ impl RigidBodyModel {
         let mut pairs = Vec::new();
         let mut carried = Vec::new();
         for c in candidates {
-            if c.body.id == own.body.id
+            if c.body.id() == own.body.id()
                 || !own.may_touch(c, slack)
                 || !own.boxes_within(c, own.motion + c.motion + slack)
             {
@@ -129,7 +129,7 @@ impl RigidBodyModel {
                 // it, but stops its own approach to it (a carried set); a sleeping partner is a
                 // pile contact (a frozen body does not move out of the way, so a woken lower
                 // body must not move into it); a partner `own` rests on is immovable.
-                Some(lower) if lower == own.body.id => {
+                Some(lower) if lower == own.body.id() => {
                     if self.is_asleep(j) {
                         sets.push(pile_contact(own.body, j, &m));
                     } else {
@@ -137,7 +137,7 @@ impl RigidBodyModel {
                     }
                 }
                 Some(_) => {
-                    support_depth = support_depth.min(j.support_depth.saturating_add(1));
+                    support_depth = support_depth.min(u32::from(j.support_depth) + 1);
                     let mut set = view(own.body, j, &m);
                     for p in &mut set.points {
                         p.partner_inv_mass = 0.0;
@@ -165,8 +165,8 @@ impl RigidBodyModel {
             }
         }
         sets.sort_unstable_by_key(|s| s.partner);
-        pairs.sort_unstable_by_key(|p| p.partner.id);
-        carried.sort_unstable_by_key(|c: &(&Body, PairManifold)| c.0.id);
+        pairs.sort_unstable_by_key(|p| p.partner.id());
+        carried.sort_unstable_by_key(|c: &(&Body, PairManifold)| c.0.id());
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
         let radius = own.body.bounding_radius();
         if let Some(env) = environment_contacts(
@@ -234,9 +234,9 @@ impl RigidBodyModel {
         let mut depth = u32::MAX;
         for c in candidates {
             let j = c.body;
-            if j.id == own.body.id
+            if j.id() == own.body.id()
                 || j.support_depth == 0
-                || j.support_depth.saturating_add(1) >= depth
+                || u32::from(j.support_depth) + 1 >= depth
                 || !own.may_touch(c, own.motion + c.motion + 2.0 * slack)
                 || !own.boxes_within(c, 2.0 * (own.motion + c.motion + slack))
             {
@@ -252,8 +252,8 @@ impl RigidBodyModel {
             let Some(m) = pair_manifold(a, b, ahead, keep) else {
                 continue;
             };
-            if self.support(a, b, &m) == Some(j.id) {
-                depth = j.support_depth.saturating_add(1);
+            if self.support(a, b, &m) == Some(j.id()) {
+                depth = u32::from(j.support_depth) + 1;
             }
         }
         (depth != u32::MAX).then_some(depth)
@@ -267,7 +267,7 @@ impl RigidBodyModel {
         reach: f32,
         cache: &mut ManifoldCache,
     ) -> Option<PairManifold> {
-        match cache.binary_search_by_key(&(a.id, b.id), |e| (e.0, e.1)) {
+        match cache.binary_search_by_key(&(a.id(), b.id()), |e| (e.0, e.1)) {
             Ok(pos) => cache[pos].2.clone(),
             Err(pos) => {
                 let keep = keep_distance(
@@ -277,7 +277,7 @@ impl RigidBodyModel {
                     self.prediction(),
                 );
                 let m = pair_manifold(a, b, reach, keep);
-                cache.insert(pos, (a.id, b.id, m.clone()));
+                cache.insert(pos, (a.id(), b.id(), m.clone()));
                 m
             }
         }
@@ -316,7 +316,7 @@ impl RigidBodyModel {
         } else {
             return None;
         };
-        (lower.support_depth > 0).then_some(lower.id)
+        (lower.support_depth > 0).then_some(lower.id())
     }
 
     /// Whether the symmetric contact of `a` and `b` is a *pile contact* (SPEC.md §5.3): with
@@ -397,7 +397,7 @@ impl RigidBodyModel {
         let mut beaten = false;
         let mut mine = 1;
         for p in pairs {
-            if p.partner.id != entry.partner.id && shared(p.offset) {
+            if p.partner.id() != entry.partner.id() && shared(p.offset) {
                 if let Some(e) = p.contact.edge(rest) {
                     mine += 1;
                     beaten |= beats(&e);
@@ -410,7 +410,7 @@ impl RigidBodyModel {
                 continue;
             }
             for k in cell.iter() {
-                if k.id == own.id || k.id == entry.partner.id {
+                if k.id() == own.id() || k.id() == entry.partner.id() {
                     continue;
                 }
                 if let Some(e) = self.edge(entry.partner, k, cache) {
@@ -435,13 +435,13 @@ impl RigidBodyModel {
 
     /// Whether `b` is asleep at step `t` (its rest counter reached `sleep_steps`).
     pub fn is_asleep(&self, b: &Body) -> bool {
-        self.sleeping() && b.rest_steps >= self.params.sleep_steps
+        self.sleeping() && u32::from(b.rest_steps) >= self.params.sleep_steps.min(MAX_SLEEP_STEPS)
     }
 
     /// Whether bodies `i` and `k` can interact during this step (bounding spheres within the
     /// pair's speculative distance, SPEC.md §5.2): the test for contacts and for waking.
     fn can_reach(&self, i: &Body, k: &Body) -> bool {
-        let (a, b) = if i.id < k.id { (i, k) } else { (k, i) };
+        let (a, b) = if i.id() < k.id() { (i, k) } else { (k, i) };
         let cap = self.prediction();
         let reach = speculative_distance(
             a,
@@ -474,7 +474,7 @@ impl RigidBodyModel {
         if capped {
             events.push(Event {
                 step,
-                body: after.id,
+                body: after.id(),
                 kind: EventKind::SpeedCapped,
             });
         }
@@ -577,7 +577,7 @@ fn carried_contact(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
 
 /// The pair in canonical order: lower id first.
 fn canonical<'a>(x: &'a Body, y: &'a Body) -> (&'a Body, &'a Body) {
-    if x.id < y.id {
+    if x.id() < y.id() {
         (x, y)
     } else {
         (y, x)
@@ -611,7 +611,7 @@ fn assert_finite(b: &Body, step: Step) {
             if !v.is_finite() {
                 panic!(
                     "body {} at step {step}: {name} {axis} is {v:?} (0x{:08x}) after computing step {step} -> {}",
-                    b.id,
+                    b.id(),
                     v.to_bits(),
                     step + 1
                 );
@@ -633,7 +633,7 @@ impl CellModel for RigidBodyModel {
     type Event = EventKind;
 
     fn id(state: &Body) -> BodyId {
-        state.id
+        state.id()
     }
 
     fn position(state: &Body) -> [f32; 3] {
@@ -756,14 +756,18 @@ impl CellModel for RigidBodyModel {
                             (true, (1, 1))
                         } else if edge.impact && self.matched() {
                             (false, (1, 1))
-                        } else if own.id < entry.partner.id {
+                        } else if own.id() < entry.partner.id() {
                             (true, (mine, theirs))
                         } else {
                             (true, (theirs, mine))
                         }
                     }
                 };
-                effect.add(&entry.contact.effect(own.id, resolve, counts, self.dt, rest));
+                effect.add(
+                    &entry
+                        .contact
+                        .effect(own.id(), resolve, counts, self.dt, rest),
+                );
             }
             let mut start = own.clone();
             start.linvel += effect.dv;
@@ -805,18 +809,20 @@ impl CellModel for RigidBodyModel {
             }
             assert_finite(&next, step);
             self.cap(own, &mut next, step, events);
-            next.support_depth = found.support_depth;
+            // Saturating: a column deeper than 65,535 bodies counts as that deep.
+            next.support_depth = found.support_depth.min(u32::from(u16::MAX)) as u16;
             let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);
             next.rest_steps =
                 if self.sleeping() && found.partners_quiet && quiet(own) && quiet(&next) {
-                    (own.rest_steps + 1).min(self.params.sleep_steps)
+                    (own.rest_steps.saturating_add(1))
+                        .min(self.params.sleep_steps.min(MAX_SLEEP_STEPS) as u16)
                 } else {
                     0
                 };
             if !self.domain.contains(&next.position) {
                 events.push(Event {
                     step,
-                    body: next.id,
+                    body: next.id(),
                     kind: EventKind::LeftDomain,
                 });
                 continue;
@@ -859,8 +865,8 @@ impl CellModel for RigidBodyModel {
         for c in [q.w, q.i, q.j, q.k] {
             h.f32(c);
         }
-        h.u32(b.rest_steps);
-        h.u32(b.support_depth);
+        h.u32(u32::from(b.rest_steps));
+        h.u32(u32::from(b.support_depth));
     }
 
     /// Bit equality of every field (every hashed field is an `f32`/`u32` compared here by
@@ -871,7 +877,7 @@ impl CellModel for RigidBodyModel {
             let q = b.rotation.quaternion();
             [q.w.to_bits(), q.i.to_bits(), q.j.to_bits(), q.k.to_bits()]
         };
-        a.id == b.id
+        a.id() == b.id()
             && a.rest_steps == b.rest_steps
             && a.support_depth == b.support_depth
             && bits(&a.position) == bits(&b.position)

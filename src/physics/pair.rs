@@ -101,7 +101,7 @@ struct Side {
 impl Side {
     fn of(b: &Body) -> Side {
         Side {
-            id: b.id,
+            id: b.id(),
             inv_mass: b.inv_mass(),
             inv_inertia: b.world_inv_inertia(&b.rotation),
             v: b.linvel,
@@ -153,7 +153,7 @@ impl PairContact {
         restitution: f32,
         dt: f32,
     ) -> PairContact {
-        debug_assert!(a.id < b.id);
+        debug_assert!(a.id() < b.id());
         let n = m.normal_ab;
         let (sa, sb) = (Side::of(a), Side::of(b));
         let mut toi: Option<f32> = None;

@@ -37,9 +37,14 @@ pub struct SolverParams {
     /// speed times the bounding radius).
     pub sleep_speed: f32,
     /// Steps a body and its touching partners must stay quiet before it falls asleep; 0
-    /// disables sleeping.
+    /// disables sleeping. At most [`MAX_SLEEP_STEPS`] (a body counts its quiet steps in 16
+    /// bits; a larger value counts as that many).
     pub sleep_steps: u32,
 }
+
+/// The largest `SolverParams::sleep_steps` that counts (`Body::rest_steps` is 16 bits): 65,535
+/// steps, 18 minutes at 60 steps per second.
+pub const MAX_SLEEP_STEPS: u32 = u16::MAX as u32;
 
 impl Default for SolverParams {
     fn default() -> Self {

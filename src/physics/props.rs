@@ -215,10 +215,10 @@ mod tests {
     }
 
     #[test]
-    fn a_body_state_is_72_bytes_and_keeps_its_properties() {
+    fn a_body_state_is_68_bytes_and_keeps_its_properties() {
         // What every step copies, logs and sends per body (SPEC.md §5.1): id, handle,
-        // position, orientation, both velocities and two counters.
-        assert_eq!(std::mem::size_of::<crate::physics::Body>(), 72);
+        // position, orientation, both velocities and two 16-bit counters.
+        assert_eq!(std::mem::size_of::<crate::physics::Body>(), 68);
         let m = Material {
             density: 2.0,
             friction: 0.3,
@@ -234,6 +234,9 @@ mod tests {
         assert_eq!(b.bounding_radius(), shape.bounding_radius());
         assert!(!b.props().isotropic());
         assert_eq!(b.props_id(), BodyProps::new(shape, m).intern());
+        let far =
+            crate::physics::Body::new(u64::MAX - 3, shape, m, Vec3::zeros(), Default::default());
+        assert_eq!(far.id(), u64::MAX - 3, "both halves of the id");
     }
 
     #[test]

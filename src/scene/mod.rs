@@ -246,7 +246,7 @@ impl Scene {
     /// The bodies' initial states, sorted by id.
     pub fn initial_bodies(&self) -> Vec<Body> {
         let mut v: Vec<Body> = self.bodies.iter().map(BodySpec::to_body).collect();
-        v.sort_by_key(|b| b.id);
+        v.sort_by_key(|b| b.id());
         v
     }
 }

@@ -173,11 +173,11 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         100.0,
         "must be between 0 and 100 m/s",
     )?;
-    if s.sleep_steps > 1_000_000 {
+    if s.sleep_steps > crate::physics::MAX_SLEEP_STEPS {
         return Err(c.fail(
             "solver.sleep_steps",
             s.sleep_steps,
-            "must be between 0 (no sleeping) and 1000000",
+            "must be between 0 (no sleeping) and 65535 (18 minutes at 60 steps per second)",
         ));
     }
     if let Some(e) = scene.cell_edge {
@@ -268,8 +268,8 @@ fn check_overlaps(scene: &Scene, grid: &Grid, c: &Checker) -> Result<(), SceneEr
         let p = environment_penetration(b, &model.environment);
         if p > OVERLAP_TOLERANCE {
             return Err(c.fail(
-                format!("bodies[{}].position", index_of(b.id)),
-                scene.bodies[index_of(b.id)].position,
+                format!("bodies[{}].position", index_of(b.id())),
+                scene.bodies[index_of(b.id())].position,
                 &format!("the body overlaps the static environment by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move it clear"),
             ));
         }
@@ -280,13 +280,13 @@ fn check_overlaps(scene: &Scene, grid: &Grid, c: &Checker) -> Result<(), SceneEr
     for i in state.occupied() {
         let nb = walk.at(i);
         for a in nb.own() {
-            for b in nb.iter().filter(|b| b.id > a.id) {
+            for b in nb.iter().filter(|b| b.id() > a.id()) {
                 let p = pair_penetration(a, b);
                 if p > OVERLAP_TOLERANCE {
                     return Err(c.fail(
-                        format!("bodies[{}].position", index_of(b.id)),
-                        scene.bodies[index_of(b.id)].position,
-                        &format!("body {} overlaps body {} by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move them apart", b.id, a.id),
+                        format!("bodies[{}].position", index_of(b.id())),
+                        scene.bodies[index_of(b.id())].position,
+                        &format!("body {} overlaps body {} by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move them apart", b.id(), a.id()),
                     ));
                 }
             }

@@ -67,7 +67,7 @@ pub fn measure_state(
     for i in state.occupied() {
         let nb = walk.at(i);
         for a in nb.own() {
-            for b in nb.iter().filter(|b| b.id > a.id) {
+            for b in nb.iter().filter(|b| b.id() > a.id()) {
                 pen = pen.max(pair_penetration(a, b));
             }
         }

@@ -102,7 +102,7 @@ fn collisions(state: &CellStates<Body>, grid: &Grid, model: &RigidBodyModel) -> 
                 count += 1;
                 cube |= is_cube(a);
             }
-            for b in nb.iter().filter(|b| b.id > a.id) {
+            for b in nb.iter().filter(|b| b.id() > a.id()) {
                 if model.is_asleep(a) && model.is_asleep(b) {
                     continue;
                 }

@@ -160,7 +160,7 @@ impl InputDesk {
     ) -> Result<Outcome, String> {
         let find = |id: BodyId| {
             bodies
-                .binary_search_by_key(&id, |b| b.id)
+                .binary_search_by_key(&id, |b| b.id())
                 .map(|k| bodies[k])
                 .map_err(|_| {
                     format!("body {id} is not in the scene any more (removed or left the domain)")

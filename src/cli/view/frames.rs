@@ -156,8 +156,8 @@ pub fn encode(step: u64, hash: u64, bodies: &[&Body], grid: &Grid, look: &Look) 
         let world = grid
             .cell_of(body.position.into())
             .map_or(0xFFFF, |c| owners[grid.index(c)]);
-        b.extend_from_slice(&(body.id as u32).to_le_bytes());
-        b.extend_from_slice(&((body.id >> 32) as u32).to_le_bytes());
+        b.extend_from_slice(&(body.id() as u32).to_le_bytes());
+        b.extend_from_slice(&((body.id() >> 32) as u32).to_le_bytes());
         b.extend_from_slice(&world.to_le_bytes());
         let (kind, size) = match body.shape() {
             Shape::Ball { radius } => (0u8, [radius; 3]),

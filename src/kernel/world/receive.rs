@@ -5,9 +5,9 @@ use super::index::OwnCell;
 use super::keys::{MigrationIn, RecvKey};
 use super::log::{view, Carried, Shared, Version};
 use super::World;
-use crate::kernel::SharedStates;
 use crate::kernel::config::RollbackMode;
 use crate::kernel::message::{Bodies, Message, MessageKind, Sign};
+use crate::kernel::SharedStates;
 use crate::model::{CellModel, Step};
 use std::collections::BTreeSet;
 use std::sync::Arc;
@@ -192,9 +192,11 @@ impl<M: CellModel> World<M> {
         }
         match msg.view {
             Some(v) if v.len() == msg.bodies.len() => Some(v),
-            _ => Some(
-                SharedStates::from_exact(Arc::unwrap_or_clone(msg.bodies).into_iter().map(|h| h.state)),
-            ),
+            _ => Some(SharedStates::from_exact(
+                Arc::unwrap_or_clone(msg.bodies)
+                    .into_iter()
+                    .map(|h| h.state),
+            )),
         }
     }
 

@@ -7,11 +7,11 @@ use super::index::{cells_around, OwnCell, PerOwnCell};
 use super::keys::MigrationIn;
 use super::log::{same_allocation, share, view, Out, Shared};
 use super::World;
-use crate::kernel::SharedStates;
 use crate::frame::{Event, LeftGrid};
 use crate::kernel::config::{PlantedBug, RollbackMode};
 use crate::kernel::message::{EntityEdit, Homed, Message};
 use crate::kernel::partition::WorldId;
+use crate::kernel::SharedStates;
 use crate::model::{BodyId, CellModel, Neighbourhood, Step};
 use std::collections::BTreeSet;
 
@@ -118,8 +118,8 @@ impl<M: CellModel> World<M> {
         if out_homes.iter().all(|&d| d == cell) {
             out_homes.clear();
         }
-        let bodies =
-            (!order.is_empty()).then(|| SharedStates::from_exact(order.iter().map(|&k| scratch[k].clone())));
+        let bodies = (!order.is_empty())
+            .then(|| SharedStates::from_exact(order.iter().map(|&k| scratch[k].clone())));
         self.scratch.clear();
         Out::new(cell, bodies, out_homes, events, true)
     }
