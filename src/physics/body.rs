@@ -116,7 +116,7 @@ impl Default for Material {
 /// The constant properties (shape, inverse mass and inertia, friction, restitution) are
 /// interned ([`BodyProps::intern`]): the body holds their 4-byte handle, so a state is 68
 /// bytes instead of 112 and every copy, log entry and message carries only what moves.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct Body {
     /// Unique id ([`Body::id`]), as two 32-bit halves (low, high): with every other field
     /// 4-byte aligned, the state is 68 bytes, not 72.
@@ -142,6 +142,22 @@ pub struct Body {
     /// without gravity). Only a body of depth > 0 carries another by shock propagation.
     /// Part of the hashed state.
     pub support_depth: u16,
+}
+
+/// The id and the properties themselves (not the process-local handle), then the state.
+impl std::fmt::Debug for Body {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Body")
+            .field("id", &self.id())
+            .field("props", self.props())
+            .field("position", &self.position)
+            .field("rotation", &self.rotation)
+            .field("linvel", &self.linvel)
+            .field("angvel", &self.angvel)
+            .field("rest_steps", &self.rest_steps)
+            .field("support_depth", &self.support_depth)
+            .finish()
+    }
 }
 
 impl Body {

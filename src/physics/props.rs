@@ -237,6 +237,11 @@ mod tests {
         let far =
             crate::physics::Body::new(u64::MAX - 3, shape, m, Vec3::zeros(), Default::default());
         assert_eq!(far.id(), u64::MAX - 3, "both halves of the id");
+        let shown = format!("{b:?}");
+        assert!(
+            shown.contains("id: 7") && shown.contains("friction: 0.3"),
+            "Debug shows the id and the properties, not the handle: {shown}"
+        );
     }
 
     #[test]
