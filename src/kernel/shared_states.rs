@@ -14,7 +14,7 @@ pub struct SharedStates<S>(ThinArc<(), S>);
 impl<S> SharedStates<S> {
     /// The states of `v`, moved into one new allocation.
     pub fn from_vec(v: Vec<S>) -> Self {
-        SharedStates(ThinArc::from_header_and_iter((), v.into_iter()))
+        SharedStates::from_exact(v.into_iter())
     }
 
     /// The states of `items`, written straight into one new allocation.
@@ -58,17 +58,9 @@ impl<S: std::fmt::Debug> std::fmt::Debug for SharedStates<S> {
     }
 }
 
-/// Collects through a `Vec` (the allocation needs its length first); an exact-size iterator
-/// goes straight in with [`SharedStates::from_exact`].
-impl<S> FromIterator<S> for SharedStates<S> {
-    fn from_iter<I: IntoIterator<Item = S>>(items: I) -> Self {
-        SharedStates::from_vec(items.into_iter().collect())
-    }
-}
-
 impl<S: Clone> From<&[S]> for SharedStates<S> {
     fn from(s: &[S]) -> Self {
-        SharedStates(ThinArc::from_header_and_iter((), s.iter().cloned()))
+        SharedStates::from_exact(s.iter().cloned())
     }
 }
 

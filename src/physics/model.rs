@@ -8,7 +8,7 @@ use super::contact::{
 use super::environment::{DomainBox, Environment};
 use super::event::EventKind;
 use super::pair::{Edge, PairContact, PairEffect};
-use super::params::{SolverParams, MAX_SLEEP_STEPS};
+use super::params::SolverParams;
 use super::solver::{approaches, integrate_rotation, solve_body};
 use crate::frame::Event;
 use crate::grid::Grid;
@@ -435,7 +435,7 @@ impl RigidBodyModel {
 
     /// Whether `b` is asleep at step `t` (its rest counter reached `sleep_steps`).
     pub fn is_asleep(&self, b: &Body) -> bool {
-        self.sleeping() && u32::from(b.rest_steps) >= self.params.sleep_steps.min(MAX_SLEEP_STEPS)
+        self.sleeping() && b.rest_steps >= self.params.sleep_limit()
     }
 
     /// Whether bodies `i` and `k` can interact during this step (bounding spheres within the
@@ -814,8 +814,9 @@ impl CellModel for RigidBodyModel {
             let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);
             next.rest_steps =
                 if self.sleeping() && found.partners_quiet && quiet(own) && quiet(&next) {
-                    (own.rest_steps.saturating_add(1))
-                        .min(self.params.sleep_steps.min(MAX_SLEEP_STEPS) as u16)
+                    own.rest_steps
+                        .saturating_add(1)
+                        .min(self.params.sleep_limit())
                 } else {
                     0
                 };

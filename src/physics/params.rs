@@ -46,6 +46,14 @@ pub struct SolverParams {
 /// steps, 18 minutes at 60 steps per second.
 pub const MAX_SLEEP_STEPS: u32 = u16::MAX as u32;
 
+impl SolverParams {
+    /// The quiet steps after which a body is asleep, as its 16-bit counter reaches them:
+    /// `sleep_steps` capped at [`MAX_SLEEP_STEPS`] (0: sleeping is off).
+    pub fn sleep_limit(&self) -> u16 {
+        self.sleep_steps.min(MAX_SLEEP_STEPS) as u16
+    }
+}
+
 impl Default for SolverParams {
     fn default() -> Self {
         SolverParams {

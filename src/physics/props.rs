@@ -16,7 +16,9 @@ use std::sync::Mutex;
 
 /// A body's shape, inverse mass and inertia, and surface coefficients: what does not change
 /// while it moves; with two figures derived from them once, here, instead of at every use.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Two are equal exactly when their bits are (as interning compares them: `-0.0` is not
+/// `+0.0`).
+#[derive(Clone, Copy, Debug)]
 pub struct BodyProps {
     shape: Shape,
     inv_mass: f32,
@@ -30,8 +32,10 @@ pub struct BodyProps {
     isotropic: bool,
 }
 
-/// The handle of an interned [`BodyProps`] (process-local; see the module's doc).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+/// The handle of an interned [`BodyProps`] (process-local; see the module's doc). It has no
+/// order on purpose: its value depends on the order in which the process met each kind of
+/// body, so sorting by it would make results depend on that.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PropsId(u32);
 
 /// The interned properties, by handle.
@@ -157,6 +161,12 @@ impl BodyProps {
     }
 }
 
+impl PartialEq for BodyProps {
+    fn eq(&self, other: &Self) -> bool {
+        self.key() == other.key()
+    }
+}
+
 impl PropsId {
     /// The properties this handle stands for.
     #[inline]
@@ -211,6 +221,8 @@ mod tests {
             with(0.0).intern(),
             "-0.0 and +0.0 differ in bits"
         );
+        assert_ne!(with(-0.0), with(0.0), "equality is by bits, as interning");
+        assert_eq!(with(0.25), with(0.25));
         assert!(PropsId::interned() >= 3);
     }
 

@@ -186,7 +186,7 @@ pub fn run_scene_from(
     let model = scene.model();
     let grid = scene.grid();
     // The run takes the starting bodies; a copy is kept only when they cannot be built
-    // again (resumed from given bodies): a million bodies' copy is 72 MB.
+    // again (resumed from given bodies): a million bodies' copy is 68 MB.
     let resumed = from.is_some();
     let ResumeFrom {
         step: origin,
