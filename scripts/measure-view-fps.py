@@ -66,7 +66,8 @@ GL = {
 # Installed in the page: counts animation frames and distinct frames shown.
 COUNTERS = """
 const c = window.__measure = { raf: 0, shown: 0, last: null, t0: performance.now(), gaps: [],
-  frames0: window.soda.frames, arrived: [0, 0, 0] };
+  frames0: window.soda.frames, arrived: [0, 0, 0],
+  unchanged0: window.soda.unchanged, renders0: window.soda.renders };
 let prev = performance.now(), frames = window.soda.frames;
 function tick(now) {
   c.raf++;
@@ -88,6 +89,10 @@ return { seconds: (now - c.t0) / 1000, raf: c.raf, shown: c.shown,
          gap_p50: gaps[Math.floor(gaps.length * 0.5)] || 0,
          gap_p95: gaps[Math.floor(gaps.length * 0.95)] || 0,
          draw_ms: s.drawMs, render_ms: s.renderMs, received: s.frames - c.frames0, arrived: c.arrived,
+         // Pages from 2026-11-26 20:00 on: frames shown with their bodies unchanged (not placed
+         // again), and render calls.
+         unchanged: s.unchanged === undefined ? null : s.unchanged - c.unchanged0,
+         renders: s.renders === undefined ? null : s.renders - c.renders0,
          in_sight: s.drawn === undefined ? null : s.drawn, triangles: s.triangles === undefined ? null : s.triangles,
          step: s.shown ? s.shown.step : null, buffered: s.shown ? s.shown.buffered : null,
          stats: window.sodaStats ? JSON.parse(JSON.stringify(window.sodaStats)) : null,
@@ -275,6 +280,10 @@ def measure(soda, view_args, seconds, warmup, size, page, screenshot=None, query
         # Frames received per second, and animation frames that found 0, 1, 2+ new frames.
         "received_fps": round(r["received"] / wall, 1),
         "arrived_per_tick": r["arrived"],
+        # Frames shown whose bodies were those of the frame before (the page neither placed
+        # nor, without flashes, rendered them), and render calls, per second.
+        "unchanged_fps": None if r["unchanged"] is None else round(r["unchanged"] / wall, 1),
+        "renders_per_s": None if r["renders"] is None else round(r["renders"] / wall, 1),
         "gap_ms_p50": round(r["gap_p50"], 1),
         "gap_ms_p95": round(r["gap_p95"], 1),
         "draw_ms": round(r["draw_ms"], 2),
@@ -373,11 +382,14 @@ def main():
             results[(b, p, q, g)].append(r)
             print(json.dumps({"soda": b, "page": p, "query": q, "gl": g, "run": run + 1, **r}), flush=True)
     keys = ["page_fps", "shown_fps", "received_fps", "gap_ms_p50", "gap_ms_p95", "draw_ms", "render_ms",
-            "renderer_task_s_per_s", "scale"]
+            "renderer_task_s_per_s", "scale", "unchanged_fps", "renders_per_s"]
     print("# medians: " + ", ".join(keys))
     for (b, p, q, g), rs in results.items():
+        def median(k):
+            xs = [r[k] for r in rs if r[k] is not None]
+            return f"{statistics.median(xs):g}" if xs else "-"
         print(f"{b}{' page ' + p if p else ''}{' ?' + q if q else ''} gl {g}: "
-              + ", ".join(f"{k} {statistics.median(r[k] for r in rs):g}" for k in keys))
+              + ", ".join(f"{k} {median(k)}" for k in keys))
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -262,3 +262,123 @@ fn the_page_draws_bodies_stamps_a_click_and_its_saved_run_replays_to_the_shown_h
     drop(browser);
     assert_eq!(viewer.interrupt().code(), Some(130));
 }
+
+/// A rectangle of the page in CSS pixels (= screenshot pixels in headless Chromium).
+#[derive(Clone, Copy, Debug)]
+struct Rect {
+    x: usize,
+    y: usize,
+    w: usize,
+    h: usize,
+}
+
+impl Rect {
+    /// The element's bounding rectangle, shrunk to whole pixels inside it.
+    fn of(browser: &Browser, css: &str) -> Rect {
+        let v = browser.js(&format!(
+            "const r = document.querySelector('{css}').getBoundingClientRect();
+             return [Math.ceil(r.left), Math.ceil(r.top), Math.floor(r.right), Math.floor(r.bottom)];"
+        ));
+        let n: Vec<usize> = v
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap().max(0.0) as usize)
+            .collect();
+        Rect {
+            x: n[0],
+            y: n[1],
+            w: n[2].saturating_sub(n[0]),
+            h: n[3].saturating_sub(n[1]),
+        }
+    }
+
+    fn contains(&self, col: usize, row: usize) -> bool {
+        (self.x..self.x + self.w).contains(&col) && (self.y..self.y + self.h).contains(&row)
+    }
+}
+
+/// The RGB pixels of a PNG inside `area` and outside every rectangle of `except`, row by row.
+fn pixels_in(png_bytes: &[u8], area: Rect, except: &[Rect]) -> Vec<[u8; 3]> {
+    let decoder = png::Decoder::new(std::io::Cursor::new(png_bytes));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let channels = info.color_type.samples();
+    let width = info.width as usize;
+    assert!(area.x + area.w <= width && area.y + area.h <= info.height as usize);
+    let mut out = Vec::with_capacity(area.w * area.h);
+    for row in area.y..area.y + area.h {
+        for col in area.x..area.x + area.w {
+            if except.iter().any(|r| r.contains(col, row)) {
+                continue;
+            }
+            let p = &buf[(row * width + col) * channels..];
+            out.push([p[0], p[1], p[2]]);
+        }
+    }
+    out
+}
+
+#[test]
+#[ignore = "needs Chromium and ChromeDriver: scripts/install-browser-test-deps.sh, then --ignored (.ci/run does both)"]
+fn frames_with_unchanged_bodies_are_shown_without_a_redraw_and_look_like_a_full_redraw() {
+    let mut viewer = Viewer::start(&[
+        "--scene",
+        "falling-cubes",
+        "--objects",
+        "300",
+        "--threads",
+        "2",
+        "--worlds",
+        "4",
+    ]);
+    let browser = Browser::start();
+    // A fixed render scale: the automatic one would resize (and redraw) as the page speeds up.
+    browser.post(
+        "/url",
+        json!({"url": format!("{}?scale=0.5", viewer.url())}),
+    );
+    // The pile comes to rest: frames keep coming and are shown, their bodies unchanged.
+    browser.wait_for(
+        "frames shown without a redraw",
+        "return window.soda && window.soda.unchanged > 60",
+    );
+    let step = browser
+        .js("return window.soda.shown.step")
+        .as_f64()
+        .unwrap();
+    browser.wait_for(
+        "more unchanged frames shown",
+        &format!("return window.soda.shown.step > {step} + 30 && window.soda.unchanged > 90"),
+    );
+    // Still: no flash fading, the display paused.
+    browser.click_element("#pause");
+    browser.wait_for("a paused display", "return window.soda.shown.paused");
+    std::thread::sleep(Duration::from_millis(1500));
+    // The canvas, less the panels drawn over it.
+    let canvas = Rect::of(&browser, "#view canvas");
+    let over = [Rect::of(&browser, "#panel"), Rect::of(&browser, "#help")];
+    let kept = pixels_in(&browser.screenshot(), canvas, &over);
+    // Place every body again and render, as for a changed frame.
+    browser.js("window.soda.renderNow(); return true;");
+    let redrawn = pixels_in(&browser.screenshot(), canvas, &over);
+    let differing = kept.iter().zip(&redrawn).filter(|(a, b)| a != b).count();
+    let coloured = kept
+        .iter()
+        .filter(|p| p.iter().max().unwrap() - p.iter().min().unwrap() > 60)
+        .count();
+    assert!(
+        coloured > kept.len() / 400,
+        "the kept picture shows no bodies ({coloured} of {} pixels coloured)",
+        kept.len()
+    );
+    assert_eq!(
+        differing,
+        0,
+        "{differing} of {} canvas pixels differ from a full redraw",
+        kept.len()
+    );
+    drop(browser);
+    assert_eq!(viewer.interrupt().code(), Some(130));
+}

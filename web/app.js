@@ -686,8 +686,22 @@ function adapt(now) {
   if (!panelFrame && soda.shown) panelFrame = lastFrame;
 }
 let lastFrame = null;
-// The bodies are placed again when a new frame came or the camera moved or the page resized.
-let placeAgain = false;
+// The bodies are placed again when a new frame came or the camera moved or the page resized,
+// or the selected body changed. A frame whose bodies are byte for byte those of the frame
+// placed last (a pile at rest: every body asleep) leaves the meshes as they are and, with no
+// flash fading and the camera still, needs no render either: the picture on the canvas is
+// already that frame's, pixel for pixel, and the software GL's time goes to frames that
+// change.
+let placeAgain = false, placedSelected = null;
+function sameBodies(a, b) {
+  if (!a || a.bodies !== b.bodies) return false;
+  const words = a.bodies * (BODY / 4);
+  const x = new Int32Array(a.view.buffer, a.bodyOffset, words), y = new Int32Array(b.view.buffer, b.bodyOffset, words);
+  for (let i = 0; i < words; i++) if (x[i] !== y[i]) return false;
+  return true;
+}
+soda.unchanged = 0;   // frames shown without placing the bodies (their bodies were unchanged)
+soda.renders = 0;     // renderer.render calls so far
 controls.addEventListener('change', () => { placeAgain = true; });
 window.addEventListener('resize', () => { placeAgain = true; });
 function loop(now) {
@@ -696,11 +710,20 @@ function loop(now) {
   if (queued.length > 0 && soda.scene) {
     let f = null;
     try { f = decode(queued.shift()); } catch (err) { say(String(err)); }
-    if (f) { draw(f); lastFrame = f; placeAgain = true; }
+    if (f) {
+      const flashing = flashMesh !== null && flashMesh.count > 0;
+      draw(f);   // fades the flashes one step: drawn if any was showing
+      if (flashing || (flashMesh !== null && flashMesh.count > 0)) needRender = true;
+      if (sameBodies(lastFrame, f)) soda.unchanged++;
+      else placeAgain = true;
+      lastFrame = f;
+    }
   }
   if (controls.update()) placeAgain = true;
+  if (placedSelected !== soda.selected) placeAgain = true;
   if (placeAgain && lastFrame) {
     placeAgain = false;
+    placedSelected = soda.selected;
     placeBodies(lastFrame);
     soda.drawMs = soda.drawMs * 0.9 + (performance.now() - t0) * 0.1;
     needRender = true;
@@ -712,6 +735,7 @@ function loop(now) {
     renderer.render(world3, camera);
     soda.renderMs = soda.renderMs * 0.9 + (performance.now() - r0) * 0.1;
     stats.renders++;
+    soda.renders++;
   }
   stats.drawMs = soda.drawMs; stats.renderMs = soda.renderMs;
   if (panelFrame && now - panelAt > 125) drawPanel();
