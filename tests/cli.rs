@@ -261,6 +261,13 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "radius = 3.0",
             "smaller than the domain",
         ),
+        // A spin beyond the cap overflowed the rotation to NaN in the first step.
+        (
+            "spin.toml",
+            "position = [2.0, 1.0, 2.0]\n",
+            "position = [2.0, 1.0, 2.0]\nangular_velocity = [1e30, 0.0, 0.0]\n",
+            "bodies[0].angular_velocity` = [1e30, 0.0, 0.0] is invalid: angular speed must not exceed solver.max_angular_speed",
+        ),
     ];
     for (name, from, to, mention) in cases {
         assert!(BAD_BASE.contains(from), "{name}");

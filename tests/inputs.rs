@@ -126,6 +126,27 @@ fn bad_input_scripts_are_refused_naming_the_entry_and_field() {
             "impulse = [0.0, nan, 2.0]",
             "finite",
         ),
+        // Beyond the caps (a huge push overflowed the rotation to NaN in the step).
+        (
+            "impulse = [0.0, 8.0, 2.0]",
+            "impulse = [1e30, 8.0, 2.0]",
+            "inputs[0].impulse` = [1e30, 8.0, 2.0] is invalid: would change body 3's speed",
+        ),
+        (
+            "impulse = [0.0, 8.0, 2.0]",
+            "impulse = [0.0, 8.0e19, 2.0]",
+            "more than solver.max_speed = 30",
+        ),
+        (
+            "angular_impulse = [0.0, 0.0, 1.0]",
+            "angular_impulse = [0.0, 0.0, 1e30]",
+            "inputs[0].angular_impulse",
+        ),
+        (
+            "velocity = [1.0, 0.0, 0.0]",
+            "velocity = [1.0, 0.0, 0.0]\nangular_velocity = [0.0, 1e30, 0.0]",
+            "angular speed must not exceed solver.max_angular_speed = 60",
+        ),
         ("id = 5000, shape", "id = 5, shape", "must not be in use"),
         (
             "[0.5, 0.5, 0.5]",

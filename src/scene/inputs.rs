@@ -4,7 +4,7 @@
 //! kernel inputs that every executor applies with the same bits (SPEC.md §8, §7).
 
 use super::file::{json_message, toml_message};
-use super::validate::validate_added_body;
+use super::validate::{length, validate_added_body};
 use super::{BodySpec, Scene, SceneError, SceneFormat};
 use crate::kernel::{Edit, Input};
 use crate::math::Vec3;
@@ -123,6 +123,13 @@ impl InputScript {
         let mut presence = Presence {
             ids: scene.bodies.iter().map(|b| (b.id, (None, None))).collect(),
         };
+        // The bodies a push may name (the scene's and those spawned so far), for its mass.
+        let mut specs: BTreeMap<BodyId, &BodySpec> =
+            if self.inputs.iter().any(|e| e.action == InputAction::Push) {
+                scene.bodies.iter().map(|b| (b.id, b)).collect()
+            } else {
+                BTreeMap::new()
+            };
         let mut out = Vec::with_capacity(order.len());
         let largest = scene.max_radius();
         for i in order {
@@ -217,6 +224,7 @@ impl InputScript {
                         ));
                     }
                     presence.ids.insert(body.id, (Some(i), None));
+                    specs.insert(body.id, body);
                     Input::Spawn(body.to_body())
                 }
                 InputAction::Remove | InputAction::Push | InputAction::SetVelocity => {
@@ -267,14 +275,46 @@ impl InputScript {
                             finite("impulse", impulse)?;
                             let angular = e.angular_impulse.unwrap_or([0.0; 3]);
                             finite("angular_impulse", angular)?;
+                            // A push beyond the speed caps is no push the step can take
+                            // (and a huge one overflows the rotation to NaN): refused here,
+                            // against the body's mass and its least rotational inertia.
+                            if let Some(spec) = specs.get(&id) {
+                                let b = spec.to_body();
+                                let dv = length(impulse) * f64::from(b.inv_mass());
+                                if dv > f64::from(scene.solver.max_speed) {
+                                    return Err(fail(
+                                        i,
+                                        "impulse",
+                                        format!("{impulse:?}"),
+                                        format!(
+                                            "would change body {id}'s speed by {dv:.4e} m/s (impulse / mass of {} kg), more than solver.max_speed = {} m/s: give a smaller impulse",
+                                            1.0 / b.inv_mass(),
+                                            scene.solver.max_speed
+                                        ),
+                                    ));
+                                }
+                                let most = b.inv_inertia().max();
+                                let dw = length(angular) * f64::from(most);
+                                if dw > f64::from(scene.solver.max_angular_speed) {
+                                    return Err(fail(
+                                        i,
+                                        "angular_impulse",
+                                        format!("{angular:?}"),
+                                        format!(
+                                            "could change body {id}'s spin by up to {dw:.4e} rad/s (about its axis of least inertia, {} kg·m²), more than solver.max_angular_speed = {} rad/s: give a smaller angular impulse",
+                                            1.0 / most,
+                                            scene.solver.max_angular_speed
+                                        ),
+                                    ));
+                                }
+                            }
                             Input::Edit(id, push(impulse.into(), angular.into()))
                         }
                         _ => {
                             required("velocity", e.velocity.is_some())?;
                             let velocity = e.velocity.expect("checked");
                             finite("velocity", velocity)?;
-                            let speed = Vec3::from(velocity).norm();
-                            if speed > scene.solver.max_speed {
+                            if length(velocity) > f64::from(scene.solver.max_speed) {
                                 return Err(fail(
                                     i,
                                     "velocity",
@@ -287,6 +327,17 @@ impl InputScript {
                             }
                             if let Some(w) = e.angular_velocity {
                                 finite("angular_velocity", w)?;
+                                if length(w) > f64::from(scene.solver.max_angular_speed) {
+                                    return Err(fail(
+                                        i,
+                                        "angular_velocity",
+                                        format!("{w:?}"),
+                                        format!(
+                                            "angular speed must not exceed solver.max_angular_speed = {} rad/s",
+                                            scene.solver.max_angular_speed
+                                        ),
+                                    ));
+                                }
                             }
                             Input::Edit(
                                 id,

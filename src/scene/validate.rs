@@ -373,14 +373,23 @@ fn check_body(
             ));
         }
     }
-    let speed = nalgebra::Vector3::from(b.velocity).norm();
-    if speed > s.max_speed {
+    if length(b.velocity) > f64::from(s.max_speed) {
         return Err(c.fail(
             f("velocity"),
             b.velocity,
             &format!(
                 "speed must not exceed solver.max_speed = {} m/s",
                 s.max_speed
+            ),
+        ));
+    }
+    if length(b.angular_velocity) > f64::from(s.max_angular_speed) {
+        return Err(c.fail(
+            f("angular_velocity"),
+            b.angular_velocity,
+            &format!(
+                "angular speed must not exceed solver.max_angular_speed = {} rad/s",
+                s.max_angular_speed
             ),
         ));
     }
@@ -414,4 +423,28 @@ pub fn validate_added_body(
         ));
     }
     Ok(())
+}
+
+/// The length of `v`, in f64: an f32 norm of a finite vector overflows from about 1.8e19 on
+/// (its square is beyond f32), and a check against a cap must not see infinity there.
+pub(crate) fn length(v: [f32; 3]) -> f64 {
+    v.iter()
+        .map(|&x| f64::from(x) * f64::from(x))
+        .sum::<f64>()
+        .sqrt()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::length;
+
+    #[test]
+    fn a_length_checked_against_a_cap_does_not_overflow_where_an_f32_norm_would() {
+        assert!(nalgebra::Vector3::new(1e20f32, 0.0, 0.0)
+            .norm()
+            .is_infinite());
+        assert_eq!(length([1e20, 0.0, 0.0]), 1e20f32 as f64);
+        assert_eq!(length([3.0, 4.0, 0.0]), 5.0);
+        assert!(length([f32::MAX, f32::MAX, f32::MAX]).is_finite());
+    }
 }
