@@ -268,6 +268,19 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "position = [2.0, 1.0, 2.0]\nangular_velocity = [1e30, 0.0, 0.0]\n",
             "bodies[0].angular_velocity` = [1e30, 0.0, 0.0] is invalid: angular speed must not exceed solver.max_angular_speed",
         ),
+        // Caps and forces whose step overflows f32 (a NaN rotation, hovering bodies).
+        (
+            "cap.toml",
+            "position = [2.0, 1.0, 2.0]\n",
+            "position = [2.0, 1.0, 2.0]\nangular_velocity = [1e22, 0.0, 0.0]\n\n[solver]\nmax_angular_speed = 1e22\n",
+            "solver.max_angular_speed` = 1e22 is invalid: must be greater than 0 and at most 1e6 rad/s",
+        ),
+        (
+            "gravity.toml",
+            "[domain]",
+            "gravity = [0.0, -3e38, 0.0]\n\n[domain]",
+            "field `gravity`",
+        ),
     ];
     for (name, from, to, mention) in cases {
         assert!(BAD_BASE.contains(from), "{name}");
@@ -809,6 +822,72 @@ fn plot_draws_three_charts_that_decode_as_svg_images_from_a_recorded_trace() {
             "{name}"
         );
         assert!(tree.root().has_children(), "{name} draws something");
+    }
+}
+
+#[test]
+fn plot_refuses_an_edited_trace_naming_the_field_and_writes_no_chart() {
+    let dir = tempfile::tempdir().unwrap();
+    let trace = dir.path().join("trace.json");
+    ok(&[
+        "run",
+        "--objects",
+        "60",
+        "--steps",
+        "20",
+        "--executor",
+        "virtual",
+        "--worlds",
+        "3",
+        "--trace",
+        trace.to_str().unwrap(),
+    ]);
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let good: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let edits: [(&str, fn(&mut serde_json::Value), &str); 4] = [
+        (
+            "grid",
+            |t| t["grid"] = serde_json::json!([0, 0, 0]),
+            "field `grid` = [0, 0, 0]",
+        ),
+        (
+            "huge grid",
+            |t| t["grid"] = serde_json::json!([100000, 100000, 100000]),
+            "at most 4194304 cells",
+        ),
+        (
+            "owners",
+            |t| t["owners"].as_array_mut().unwrap().truncate(2),
+            "field `owners` = 2 entries",
+        ),
+        (
+            "owner",
+            |t| t["owners"][0] = serde_json::json!(9),
+            "field `owners[0]` = 9",
+        ),
+    ];
+    for (what, edit, expected) in edits {
+        let mut t = good.clone();
+        edit(&mut t);
+        let bad = dir.path().join("edited.json");
+        std::fs::write(&bad, t.to_string()).unwrap();
+        let out = dir
+            .path()
+            .join(format!("charts-{}", what.replace(' ', "-")));
+        let err = fails(&[
+            "plot",
+            bad.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            err.contains("edited.json") && err.contains(expected),
+            "{what}: {err}"
+        );
+        assert!(
+            !out.join("spacetime.svg").exists(),
+            "{what}: a chart was written"
+        );
     }
 }
 

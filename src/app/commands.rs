@@ -242,6 +242,12 @@ pub fn plot(trace: &Path, out: &Path) -> Result<()> {
             trace.display()
         )
     })?;
+    t.check().with_context(|| {
+        format!(
+            "{} is not a trace written by `run --trace`",
+            trace.display()
+        )
+    })?;
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create the directory {}", out.display()))?;
     for (name, draw) in [

@@ -34,6 +34,12 @@ pub fn plot(args: &PlotArgs) -> Result<()> {
             args.trace.display()
         )
     })?;
+    trace.check().with_context(|| {
+        format!(
+            "{} is not a trace written by `soda run --trace`",
+            args.trace.display()
+        )
+    })?;
     let mut plan = super::plan::OutputPlan::new();
     plan.input("the trace", &args.trace);
     plan.dir("--out", &args.out)?;

@@ -38,5 +38,5 @@ pub use counters::{BalanceCounters, Counters, WorldCounters};
 pub use message::{Edit, EntityEdit, Homed, Input, Message, MessageKey, MessageKind, Sign};
 pub use partition::{Partition, WorldId};
 pub use shared_states::SharedStates;
-pub use trace::{RunTrace, WorldTrace};
+pub use trace::{RunTrace, TraceError, WorldTrace};
 pub use world::{LogBytes, World};

@@ -6,6 +6,7 @@
 //! a world computes, so a traced run commits the same bits as an untraced one.
 
 use super::partition::WorldId;
+use crate::grid::Grid;
 use crate::model::Step;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -162,7 +163,93 @@ pub struct RunTrace {
     pub recomputed_cells: Vec<(u32, u64)>,
 }
 
+/// A trace read from a file that does not describe a run ([`RunTrace::check`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("field `{field}` = {value} is invalid: {allowed}")]
+pub struct TraceError {
+    /// The field, as a path (`owners[12]`).
+    pub field: String,
+    /// The value found.
+    pub value: String,
+    /// What it must be.
+    pub allowed: String,
+}
+
 impl RunTrace {
+    /// Checks that the trace describes a run the way [`RunTrace::merge`] builds one: at
+    /// least one world, a grid of 1 to [`Grid::MAX_CELLS`] cells, an owner below `worlds`
+    /// for every cell, worlds and cells in range wherever they are named. A hand-edited or
+    /// foreign trace is refused naming the first field that is not (`soda plot` checks this
+    /// before drawing).
+    pub fn check(&self) -> Result<(), TraceError> {
+        let bad = |field: String, value: String, allowed: String| {
+            Err(TraceError {
+                field,
+                value,
+                allowed,
+            })
+        };
+        if self.worlds == 0 {
+            return bad(
+                "worlds".into(),
+                "0".into(),
+                "a run has 1 world or more".into(),
+            );
+        }
+        if self.grid.iter().any(|&n| n < 1) {
+            return bad(
+                "grid".into(),
+                format!("{:?}", self.grid),
+                "every dimension must be 1 or more".into(),
+            );
+        }
+        let cells: u64 = self.grid.iter().map(|&n| n as u64).product();
+        if cells > Grid::MAX_CELLS as u64 {
+            return bad(
+                "grid".into(),
+                format!("{:?}", self.grid),
+                format!("at most {} cells", Grid::MAX_CELLS),
+            );
+        }
+        if self.owners.len() as u64 != cells {
+            return bad(
+                "owners".into(),
+                format!("{} entries", self.owners.len()),
+                format!("one owner per cell of the grid: {cells}"),
+            );
+        }
+        let world = |field: String, w: WorldId| {
+            if (w as usize) < self.worlds {
+                Ok(())
+            } else {
+                bad(
+                    field,
+                    w.to_string(),
+                    format!("a world below `worlds` = {}", self.worlds),
+                )
+            }
+        };
+        for (i, &w) in self.owners.iter().enumerate() {
+            world(format!("owners[{i}]"), w)?;
+        }
+        for (i, s) in self.lvt.iter().enumerate() {
+            world(format!("lvt[{i}].world"), s.world)?;
+        }
+        for (i, r) in self.rollbacks.iter().enumerate() {
+            world(format!("rollbacks[{i}].world"), r.world)?;
+        }
+        for (i, &(cell, _)) in self.recomputed_cells.iter().enumerate() {
+            if cell as u64 >= cells {
+                return bad(
+                    format!("recomputed_cells[{i}]"),
+                    cell.to_string(),
+                    format!("a cell index below the grid's {cells} cells"),
+                );
+            }
+        }
+        Ok(())
+    }
+
     /// Merges the worlds' traces (in world order) with the executor's GVT samples.
     pub fn merge(
         grid: [i32; 3],

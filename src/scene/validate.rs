@@ -6,6 +6,14 @@ use crate::physics::metrics::{environment_penetration, pair_penetration};
 use crate::physics::{RigidBodyModel, Shape};
 use crate::state::CellStates;
 
+/// The largest `solver.max_angular_speed` a scene may set, rad/s: far above any rigid body's,
+/// and far below where one step's rotation update overflows f32 (~1e20 rad/s).
+pub const MAX_ANGULAR_SPEED_CAP: f32 = 1e6;
+
+/// The strongest gravity a scene may set, m/s² (about 100,000 g): far below where a step's
+/// velocity and displacement overflow f32 (a pull of 3e38 m/s² left the bodies hovering).
+pub const MAX_GRAVITY: f32 = 1e6;
+
 /// Initial overlap tolerated between bodies (and with static geometry), in metres.
 pub const OVERLAP_TOLERANCE: f32 = 1e-3;
 
@@ -101,6 +109,13 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         "must be between 0.00001 and 0.1 seconds",
     )?;
     c.finite("gravity", &scene.gravity)?;
+    if length(scene.gravity) > f64::from(MAX_GRAVITY) {
+        return Err(c.fail(
+            "gravity",
+            scene.gravity,
+            &format!("must be at most {MAX_GRAVITY:e} m/s² long (about 100,000 g); a stronger pull overflows a step's f32 arithmetic"),
+        ));
+    }
     c.finite("domain.min", &scene.domain.min)?;
     c.finite("domain.max", &scene.domain.max)?;
     for k in 0..3 {
@@ -151,7 +166,15 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         "must be between 0 and 10 metres",
     )?;
     c.positive("solver.max_speed", s.max_speed)?;
-    c.positive("solver.max_angular_speed", s.max_angular_speed)?;
+    // Beyond these the f32 arithmetic of one step overflows: a spin of 1e22 rad/s turned the
+    // orientation's update to infinity and the rotation to NaN.
+    if !(s.max_angular_speed > 0.0 && s.max_angular_speed <= MAX_ANGULAR_SPEED_CAP) {
+        return Err(c.fail(
+            "solver.max_angular_speed",
+            s.max_angular_speed,
+            &format!("must be greater than 0 and at most {MAX_ANGULAR_SPEED_CAP:e} rad/s"),
+        ));
+    }
     c.range(
         "solver.max_separation_speed",
         s.max_separation_speed,
