@@ -844,7 +844,8 @@ fn plot_refuses_an_edited_trace_naming_the_field_and_writes_no_chart() {
     ]);
     let text = std::fs::read_to_string(&trace).unwrap();
     let good: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let edits: [(&str, fn(&mut serde_json::Value), &str); 4] = [
+    type Edit = fn(&mut serde_json::Value);
+    let edits: [(&str, Edit, &str); 4] = [
         (
             "grid",
             |t| t["grid"] = serde_json::json!([0, 0, 0]),
