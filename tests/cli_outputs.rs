@@ -520,3 +520,61 @@ fn recording_a_huge_run_warns_of_its_size() {
         "{err}"
     );
 }
+
+/// Commands whose standard output is full (`> /dev/full`) or closed by its reader (`| head
+/// -c0`) end without a panic: the full device is an error naming standard output, the
+/// closed pipe a quiet success (the model commands and `plot` used `println!`, which panics).
+#[test]
+fn a_full_or_closed_standard_output_ends_commands_without_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let trace = dir.path().join("t.json");
+    let trace = trace.to_str().unwrap();
+    let charts = dir.path().join("charts");
+    let charts = charts.to_str().unwrap();
+    soda(&[
+        "run",
+        "--objects",
+        "20",
+        "--steps",
+        "10",
+        "--executor",
+        "virtual",
+        "--worlds",
+        "2",
+        "--trace",
+        trace,
+    ]);
+    let commands: &[&[&str]] = &[
+        &["models"],
+        &["run", "--model", "epidemic", "--steps", "20"],
+        &["verify", "--model", "phold", "--steps", "20"],
+        &["plot", trace, "--out", charts],
+        &["run", "--objects", "20", "--steps", "10"],
+    ];
+    for args in commands {
+        let full = Command::new(env!("CARGO_BIN_EXE_soda"))
+            .args(*args)
+            .stdout(std::fs::File::create("/dev/full").unwrap())
+            .stderr(Stdio::piped())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&full.stderr);
+        assert!(!err.contains("panicked"), "{args:?} > /dev/full: {err}");
+        assert_eq!(full.status.code(), Some(1), "{args:?} > /dev/full: {err}");
+        assert!(
+            err.contains("cannot write to standard output"),
+            "{args:?} > /dev/full: {err}"
+        );
+        let mut child = Command::new(env!("CARGO_BIN_EXE_soda"))
+            .args(*args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let closed = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&closed.stderr);
+        assert!(!err.contains("panicked"), "{args:?} | head -c0: {err}");
+        assert_eq!(closed.status.code(), Some(0), "{args:?} | head -c0: {err}");
+    }
+}

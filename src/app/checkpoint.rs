@@ -112,13 +112,16 @@ pub fn resume(
     super::commands::interrupted(&report, Some(file), written);
     super::commands::print_report(model, &report, json)?;
     if !json {
-        println!(
+        crate::app::output::print_line(format_args!(
             "resumed          from {} at step {}",
             file.display(),
             checkpoint.step
-        );
+        ))?;
         if let Some(step) = written {
-            println!("checkpoint       {} at step {step}", file.display());
+            crate::app::output::print_line(format_args!(
+                "checkpoint       {} at step {step}",
+                file.display()
+            ))?;
         }
     }
     Ok(())

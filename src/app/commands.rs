@@ -49,7 +49,10 @@ pub fn run(
     }
     print_report(model, &report, json)?;
     if let (Some(plan), Some(step), false) = (checkpoint, written, json) {
-        println!("checkpoint       {} at step {step}", plan.path.display());
+        crate::app::output::print_line(format_args!(
+            "checkpoint       {} at step {step}",
+            plan.path.display()
+        ))?;
     }
     Ok(report)
 }
@@ -83,11 +86,15 @@ pub fn interrupted(
 /// Prints a run's report: JSON, or the summary ending with the `hash` line.
 pub fn print_report(model: &dyn RegisteredModel, report: &ModelReport, json: bool) -> Result<()> {
     if json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        crate::app::output::print_line(format_args!("{}", serde_json::to_string_pretty(&report)?))?;
         return Ok(());
     }
-    println!("model            {} ({})", model.name(), model.about());
-    println!(
+    crate::app::output::print_line(format_args!(
+        "model            {} ({})",
+        model.name(),
+        model.about()
+    ))?;
+    crate::app::output::print_line(format_args!(
         "executor         {}{}",
         report.executor,
         report.kernel.as_ref().map_or(String::new(), |k| format!(
@@ -97,35 +104,35 @@ pub fn print_report(model: &dyn RegisteredModel, report: &ModelReport, json: boo
             k.mode.name(),
             k.window_spec()
         ))
-    );
-    println!(
+    ))?;
+    crate::app::output::print_line(format_args!(
         "steps            {}  ({:.3} s, {:.0} steps/s, {:.0} entity-steps/s)",
         report.steps, report.wall_seconds, report.steps_per_second, report.entity_steps_per_second
-    );
-    println!("entities         {}", report.entities);
+    ))?;
+    crate::app::output::print_line(format_args!("entities         {}", report.entities))?;
     let events: Vec<String> = report
         .events
         .iter()
         .map(|(k, v)| format!("{k} {v}"))
         .collect();
-    println!(
+    crate::app::output::print_line(format_args!(
         "events           {}",
         if events.is_empty() {
             "none".to_string()
         } else {
             events.join(", ")
         }
-    );
+    ))?;
     if let Some(k) = &report.kernel {
-        println!(
+        crate::app::output::print_line(format_args!(
             "kernel           {} rollbacks, efficiency {:.3}, {} cells re-executed, {} messages",
             k.counters.total.rollbacks(),
             k.efficiency,
             k.counters.total.cells_recomputed,
             k.counters.total.messages_sent + k.counters.total.anti_messages_sent
-        );
+        ))?;
     }
-    println!("hash             {}", report.hash);
+    crate::app::output::print_line(format_args!("hash             {}", report.hash))?;
     Ok(())
 }
 
@@ -142,7 +149,7 @@ pub fn verify(
         model.verify(size, options, &mut |_| {});
         return Ok(());
     }
-    println!(
+    crate::app::output::print_line(format_args!(
         "verify           {} ({}), {} steps, {} worlds, window {}, {} threads",
         model.name(),
         model.about(),
@@ -150,17 +157,33 @@ pub fn verify(
         options.kernel.worlds,
         options.kernel.window,
         options.threads
-    );
+    ))?;
+    // Each check is printed as it finishes; the first write that fails (a closed pipe) is
+    // kept, the rest skipped, and it ends the command once the runs are done.
+    let mut unwritten: Option<anyhow::Error> = None;
     let report = model.verify(size, options, &mut |check| {
-        println!("{check}");
-        if let (RunOutcome::Diverged(_), Some(replay)) = (&check.outcome, &check.replay) {
-            println!("         replay schedule: {replay}");
+        if unwritten.is_some() {
+            return;
         }
+        let mut written = crate::app::output::print_line(format_args!("{check}"));
+        if let (Ok(()), RunOutcome::Diverged(_), Some(replay)) =
+            (&written, &check.outcome, &check.replay)
+        {
+            written =
+                crate::app::output::print_line(format_args!("         replay schedule: {replay}"));
+        }
+        unwritten = written.err();
     });
-    println!("reference        hash {}", report.reference_hash());
+    if let Some(e) = unwritten {
+        return Err(e);
+    }
+    crate::app::output::print_line(format_args!(
+        "reference        hash {}",
+        report.reference_hash()
+    ))?;
     let diagnosis = report.diagnosis();
     for d in &diagnosis {
-        println!("diagnosis: {d}");
+        crate::app::output::print_line(format_args!("diagnosis: {d}"))?;
     }
     if !report.passed() {
         bail!(
@@ -169,11 +192,11 @@ pub fn verify(
             report.runs.len()
         );
     }
-    println!(
+    crate::app::output::print_line(format_args!(
         "all {} runs committed the reference's {} hashes",
         report.runs.len(),
         options.steps
-    );
+    ))?;
     Ok(())
 }
 
@@ -192,9 +215,9 @@ pub fn granularity(
     if windows.is_empty() || seeds == 0 {
         bail!("give at least one window (--windows 4,16) and one schedule (--seeds 1 or more)");
     }
-    println!(
+    crate::app::output::print_line(format_args!(
         "model,mode,window,seeds,steps,cells_computed,cells_recomputed,rollbacks,efficiency,hash"
-    );
+    ))?;
     for &window in windows {
         for mode in [
             RollbackMode::Cell,
@@ -216,7 +239,7 @@ pub fn granularity(
                 hash = r.hash;
             }
             let n = seeds as f64;
-            println!(
+            crate::app::output::print_line(format_args!(
                 "{},{},{window},{seeds},{steps},{:.1},{:.1},{:.1},{:.4},{hash}",
                 model.name(),
                 mode.name(),
@@ -224,7 +247,7 @@ pub fn granularity(
                 recomputed as f64 / n,
                 rollbacks as f64 / n,
                 eff / n
-            );
+            ))?;
         }
     }
     Ok(())
@@ -260,7 +283,7 @@ pub fn plot(trace: &Path, out: &Path) -> Result<()> {
     ] {
         let path = out.join(name);
         draw(&t, &path)?;
-        println!("wrote {}", path.display());
+        crate::app::output::print_line(format_args!("wrote {}", path.display()))?;
     }
     Ok(())
 }

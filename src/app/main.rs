@@ -233,7 +233,7 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
     match cli.command {
         Command::Models => {
             for m in registry.models() {
-                println!("{:<16} {}", m.name(), m.about());
+                crate::app::output::print_line(format_args!("{:<16} {}", m.name(), m.about()))?;
             }
             Ok(())
         }
@@ -354,6 +354,8 @@ pub fn main_with(registry: Registry) -> ExitCode {
     let cli = ModelCli::parse();
     match dispatch(&registry, cli) {
         Ok(()) => ExitCode::SUCCESS,
+        // The reader went away (`... | head`): nothing left to say.
+        Err(e) if super::output::is_broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
@@ -362,7 +364,9 @@ pub fn main_with(registry: Registry) -> ExitCode {
 }
 
 /// Runs one parsed command line against `registry` (for a binary that has its own parser
-/// and hands `--model` commands over).
+/// and hands `--model` commands over). A usage error comes back as the [`clap::Error`]
+/// itself (`e.downcast_ref::<clap::Error>()`), which prints clap's message and exits with its
+/// status 2 through `clap::Error::exit`.
 pub fn run_with(
     registry: &Registry,
     args: impl IntoIterator<Item = std::ffi::OsString>,
@@ -374,6 +378,6 @@ pub fn run_with(
             e.print()?;
             Ok(())
         }
-        Err(e) => Err(anyhow!("{e}")),
+        Err(e) => Err(e.into()),
     }
 }

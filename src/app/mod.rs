@@ -24,6 +24,7 @@ pub mod checkpoint;
 pub mod commands;
 pub mod interrupt;
 mod main;
+pub mod output;
 mod registry;
 
 pub use main::{main_with, run_with, ModelCli};

@@ -116,8 +116,8 @@ pub fn experiment(args: &ExperimentArgs) -> Result<()> {
         ExperimentName::ClusterModel => return cluster::cluster_model(args.quick, &csv, &svg),
     };
     write_csv(&csv, &rows)?;
-    println!("wrote {}", csv.display());
-    println!("wrote {}", svg.display());
+    super::output::print_line(format_args!("wrote {}", csv.display()))?;
+    super::output::print_line(format_args!("wrote {}", svg.display()))?;
     Ok(())
 }
 
@@ -270,8 +270,8 @@ fn model_scalability(s: &Scene, steps: u64, measured: &[(f64, f64)], svg: &Path)
             ("measured: threaded".into(), measured.to_vec()),
         ],
     )?;
-    println!("wrote {}", csv.display());
-    println!("wrote {}", chart.display());
+    super::output::print_line(format_args!("wrote {}", csv.display()))?;
+    super::output::print_line(format_args!("wrote {}", chart.display()))?;
     Ok(())
 }
 

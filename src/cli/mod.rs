@@ -139,11 +139,11 @@ fn run_rigid(cli: Cli, matches: &clap::ArgMatches) -> anyhow::Result<()> {
         Command::Plot(args) => plot::plot(&args),
         Command::Experiment(args) => experiment::experiment(&args),
         Command::Models => {
-            println!(
+            output::print_line(format_args!(
                 "{RIGID_BODIES:<16} rigid bodies of a scene (--scene, --objects): the default"
-            );
+            ))?;
             for m in soda::app::Registry::examples().models() {
-                println!("{:<16} {}", m.name(), m.about());
+                output::print_line(format_args!("{:<16} {}", m.name(), m.about()))?;
             }
             Ok(())
         }
@@ -155,6 +155,11 @@ fn report(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) if output::is_broken_pipe(&e) => ExitCode::SUCCESS,
+        // A usage error of a model's command line: clap's message and status 2, as for the
+        // rigid-body commands.
+        Err(e) if e.downcast_ref::<clap::Error>().is_some() => {
+            e.downcast_ref::<clap::Error>().expect("checked").exit()
+        }
         Err(e) => {
             eprintln!("error: {e}");
             for cause in e.chain().skip(1) {

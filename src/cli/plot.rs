@@ -50,7 +50,7 @@ pub fn plot(args: &PlotArgs) -> Result<()> {
     charts::territory_map(&trace, &territory)?;
     charts::rollback_heat_map(&trace, &heatmap)?;
     for p in [spacetime, territory, heatmap] {
-        println!("wrote {}", p.display());
+        super::output::print_line(format_args!("wrote {}", p.display()))?;
     }
     Ok(())
 }

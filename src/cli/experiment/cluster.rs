@@ -69,13 +69,13 @@ pub(super) fn cluster_model(quick: bool, csv: &Path, svg: &Path) -> Result<()> {
             }
             let costs = run.take_costs();
             let positions: Vec<[f32; 3]> = s.bodies.iter().map(|b| b.position).collect();
-            println!(
+            super::super::output::print_line(format_args!(
                 "{name} {bodies}: {steps} steps measured; a body on the wire {:.0} B, \
              encode + decode {:.3} us, hash {:.3} us",
                 wire.bytes_per_state,
                 wire.encode_decode_seconds * 1e6,
                 wire.hash_seconds * 1e6
-            );
+            ))?;
             // One partition per rank count, for every network and commit.
             let parts: Vec<Partition> = ranks
                 .iter()
@@ -145,17 +145,19 @@ pub(super) fn cluster_model(quick: bool, csv: &Path, svg: &Path) -> Result<()> {
         ("ranks", "speed-up over sequential"),
         &series,
     )?;
-    println!("MODEL (not a measurement): where a cluster reaches parallel efficiency {PAYS}");
+    super::super::output::print_line(format_args!(
+        "MODEL (not a measurement): where a cluster reaches parallel efficiency {PAYS}"
+    ))?;
     for (network, r, size) in pays {
-        println!(
+        super::super::output::print_line(format_args!(
             "  {r:>4} ranks, {network}: {}",
             size.map_or("none of the sizes tried".to_string(), |b| format!(
                 "from {b} bodies"
             ))
-        );
+        ))?;
     }
-    println!("wrote {}", csv.display());
-    println!("wrote {}", svg.display());
+    super::super::output::print_line(format_args!("wrote {}", csv.display()))?;
+    super::super::output::print_line(format_args!("wrote {}", svg.display()))?;
     Ok(())
 }
 

@@ -201,8 +201,8 @@ fn write_profile(p: &Profile, w: &PeakWindow, svg: &Path, title: &str) -> Result
             ("reference compute time".into(), cpu),
         ],
     )?;
-    println!("wrote {}", csv.display());
-    println!("wrote {}", chart.display());
+    super::super::output::print_line(format_args!("wrote {}", csv.display()))?;
+    super::super::output::print_line(format_args!("wrote {}", chart.display()))?;
     Ok(())
 }
 
@@ -369,7 +369,7 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
     }
     let model_path = svg.with_file_name("peak-resistance-model.csv");
     soda::app::atomic::write(&model_path, model_csv.as_bytes())?;
-    println!("wrote {}", model_path.display());
+    super::super::output::print_line(format_args!("wrote {}", model_path.display()))?;
     let series = |values: &[Vec<Vec<f64>>], what: &str| -> Vec<(String, Vec<(f64, f64)>)> {
         world_counts
             .iter()
@@ -408,6 +408,6 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         ),
         &[series(&gaps, "measured worst commit gap"), model_gap].concat(),
     )?;
-    println!("wrote {}", gap_chart.display());
+    super::super::output::print_line(format_args!("wrote {}", gap_chart.display()))?;
     Ok(rows)
 }

@@ -139,7 +139,7 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
     if let Err(e) = soda::app::interrupt::install() {
         eprintln!("warning: Ctrl-C will end the viewer at once: {e}");
     }
-    println!(
+    super::output::print_line(format_args!(
         "soda view: http://{address}/  ({}, {} bodies, {} executor{}; Ctrl-C stops)",
         scene.name,
         scene.bodies.len(),
@@ -149,7 +149,7 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
         } else {
             format!(", {} worlds", options.kernel.worlds)
         }
-    );
+    ))?;
 
     let committed = AtomicU64::new(0);
     let last_hash = AtomicU64::new(0);
@@ -213,20 +213,20 @@ pub fn view(args: &ViewArgs, matches: &clap::ArgMatches) -> Result<()> {
     let report = report?;
     let step = committed.load(Ordering::SeqCst);
     if !soda::app::interrupt::requested() {
-        println!(
+        super::output::print_line(format_args!(
             "soda view: ran {step} steps, hash {}; the last frame stays on show, Ctrl-C stops",
             report.hash
-        );
+        ))?;
         while !soda::app::interrupt::requested() {
             std::thread::sleep(Duration::from_millis(50));
         }
     }
     playback.close();
-    println!(
+    super::output::print_line(format_args!(
         "soda view: stopped; committed up to step {step} (hash {:016x}), showing step {}",
         last_hash.load(Ordering::SeqCst),
         playback.shown_step()
-    );
+    ))?;
     std::process::exit(i32::from(soda::app::interrupt::exit_status()));
 }
 
