@@ -578,3 +578,24 @@ fn a_full_or_closed_standard_output_ends_commands_without_a_panic() {
         assert_eq!(closed.status.code(), Some(0), "{args:?} | head -c0: {err}");
     }
 }
+
+/// A checkpoint asked of a run that computes no step is refused, not silently skipped.
+#[test]
+fn a_checkpoint_of_a_run_without_steps_is_refused_before_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = dir.path().join("z.ckpt");
+    let err = fails(&[
+        "run",
+        "--objects",
+        "30",
+        "--steps",
+        "0",
+        "--checkpoint",
+        ckpt.to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("--checkpoint") && err.contains("give --steps 1 or more"),
+        "{err}"
+    );
+    assert!(!ckpt.exists());
+}

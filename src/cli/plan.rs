@@ -52,6 +52,12 @@ impl OutputPlan {
         };
         let dir = existing_dir(flag, path)?;
         let resolved = match std::fs::metadata(path) {
+            // Renaming a whole file into place would replace it whatever its mode: a file
+            // its owner made read-only is kept, as `--csv` (which appends) keeps it.
+            Ok(m) if m.is_file() && m.permissions().readonly() => bail!(
+                "{flag} `{shown}` is read-only: soda would replace it; make it writable (chmod u+w {shown}) \
+                 or choose another path"
+            ),
             Ok(m) if m.is_file() => std::fs::canonicalize(path)
                 .with_context(|| format!("{flag}: cannot resolve `{shown}`"))?,
             Ok(m) => bail!(
@@ -221,6 +227,19 @@ mod tests {
         plan.input("the scene file", &scene);
         let err = plan.file("--record", &scene).unwrap_err().to_string();
         assert!(err.contains("scene file"), "{err}");
+    }
+
+    #[test]
+    fn a_read_only_file_is_refused_and_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("kept.csv");
+        std::fs::write(&path, "mine\n").unwrap();
+        let mut perms = std::fs::metadata(&path).unwrap().permissions();
+        perms.set_readonly(true);
+        std::fs::set_permissions(&path, perms).unwrap();
+        let err = OutputPlan::new().file("--record", &path).unwrap_err();
+        assert!(format!("{err:#}").contains("is read-only"), "{err:#}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "mine\n");
     }
 
     #[test]

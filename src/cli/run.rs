@@ -328,6 +328,14 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         );
     }
     let steps = last_step - first_step;
+    if steps == 0 && checkpoint.is_some() {
+        bail!(
+            "--checkpoint: the run computes no step (--steps {last_step}{}), so no checkpoint \
+             would be written: give --steps {} or more",
+            if first_step > 0 { " is the checkpoint's own step" } else { "" },
+            first_step + 1
+        );
+    }
     // Every entry is checked against the scene (from step 1: a resumed run's script is the
     // whole run's); those a checkpoint already holds the effect of are dropped.
     let inputs: Vec<_> = script
