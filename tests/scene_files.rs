@@ -133,7 +133,7 @@ fn unknown_shape_type_is_rejected_naming_the_allowed_types() {
 #[test]
 fn wrong_type_is_rejected_naming_the_field() {
     let text = variant("id = 1", r#"id = "one""#);
-    let msg = expect_parse_error(&text, &["line"]);
+    let msg = expect_parse_error(&text, &["line", "at `bodies[1].id`"]);
     println!("{msg}");
 }
 
@@ -245,6 +245,23 @@ fn json_scene_errors_name_the_line_and_field() {
     );
     let err = parse_scene("{\"domain\": ", SceneFormat::Json, "test.json").unwrap_err();
     assert!(err.to_string().contains("end of file"), "{err}");
+    // A wrong type deep inside names the field's path.
+    let err = parse_scene(
+        r#"{"domain": {"min": [0,0,0], "max": [4,4,4]}, "bodies": [{"id": 0,
+            "shape": {"type": "ball", "radius": 0.5}, "position": [2,1,2],
+            "material": {"density": "heavy"}}]}"#,
+        SceneFormat::Json,
+        "test.json",
+    )
+    .unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("at `bodies[0].material.density`") && msg.contains("line 3"),
+        "{msg}"
+    );
+    // A JSON array is not a scene (serde would read a struct from one, by position).
+    let err = parse_scene("[]", SceneFormat::Json, "test.json").unwrap_err();
+    assert!(err.to_string().contains("one JSON object"), "{err}");
 }
 
 #[test]

@@ -332,7 +332,11 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         bail!(
             "--checkpoint: the run computes no step (--steps {last_step}{}), so no checkpoint \
              would be written: give --steps {} or more",
-            if first_step > 0 { " is the checkpoint's own step" } else { "" },
+            if first_step > 0 {
+                " is the checkpoint's own step"
+            } else {
+                ""
+            },
             first_step + 1
         );
     }

@@ -64,17 +64,32 @@ impl SceneFormat {
 /// `bodies[3].shape.radius`, the value and what is allowed).
 pub fn parse_scene(text: &str, format: SceneFormat, origin: &str) -> Result<Scene, SceneError> {
     let scene: Scene = match format {
-        SceneFormat::Toml => toml::from_str(text).map_err(|e| SceneError::Parse {
+        SceneFormat::Toml => from_toml(text).map_err(|message| SceneError::Parse {
             origin: origin.to_string(),
-            message: toml_message(&e, text),
+            message,
         })?,
-        SceneFormat::Json => serde_json::from_str(text).map_err(|e| SceneError::Parse {
+        SceneFormat::Json => from_json(text).map_err(|message| SceneError::Parse {
             origin: origin.to_string(),
-            message: json_message(&e, text),
+            message,
         })?,
     };
     validate(&scene, origin)?;
     Ok(scene)
+}
+
+/// Parses a TOML scene or input script: on an error, the message names the field's path
+/// (`at `bodies[0].material.density``), the line and column, and shows the line.
+pub(crate) fn from_toml<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
+    let de = toml::Deserializer::parse(text).map_err(|e| toml_message(&e, text))?;
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let message = toml_message(e.inner(), text);
+        if path.is_empty() || path == "." {
+            message
+        } else {
+            format!("at `{path}`: {message}")
+        }
+    })
 }
 
 /// The TOML parser's message, with the line and column when it has a location.
@@ -101,6 +116,30 @@ pub(crate) fn toml_message(e: &toml::de::Error, text: &str) -> String {
         return format!("line {line}, column {column}: {message}");
     }
     format!("line {line}, column {column}: {message}\n  |\n{line:>3} | {source}")
+}
+
+/// Parses a JSON scene or input script: on an error, the message names the field's path
+/// (`at `bodies[0].material.density`: invalid type: ...`), the line and column, as TOML's do.
+pub(crate) fn from_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
+    if text.trim_start().starts_with('[') {
+        return Err(
+            "the file is a JSON array: a scene or input script is one JSON object \
+                    ({ ... }) with named fields"
+                .into(),
+        );
+    }
+    let mut de = serde_json::Deserializer::from_str(text);
+    let value = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let path = e.path().to_string();
+        let message = json_message(e.inner(), text);
+        if path.is_empty() || path == "." {
+            message
+        } else {
+            format!("at `{path}`: {message}")
+        }
+    })?;
+    de.end().map_err(|e| json_message(&e, text))?;
+    Ok(value)
 }
 
 /// The JSON parser's message, which already ends with the line and column; a syntax error

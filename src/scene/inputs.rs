@@ -3,7 +3,7 @@
 //! (every error names the entry, the field, the value and what is allowed), and turned into
 //! kernel inputs that every executor applies with the same bits (SPEC.md §8, §7).
 
-use super::file::{json_message, toml_message};
+use super::file::{from_json, from_toml};
 use super::validate::{length, validate_added_body};
 use super::{BodySpec, Scene, SceneError, SceneFormat};
 use crate::kernel::{Edit, Input};
@@ -85,13 +85,13 @@ pub fn parse_inputs(
     origin: &str,
 ) -> Result<InputScript, SceneError> {
     match format {
-        SceneFormat::Toml => toml::from_str(text).map_err(|e| SceneError::Parse {
+        SceneFormat::Toml => from_toml(text).map_err(|message| SceneError::Parse {
             origin: origin.to_string(),
-            message: toml_message(&e, text),
+            message,
         }),
-        SceneFormat::Json => serde_json::from_str(text).map_err(|e| SceneError::Parse {
+        SceneFormat::Json => from_json(text).map_err(|message| SceneError::Parse {
             origin: origin.to_string(),
-            message: json_message(&e, text),
+            message,
         }),
     }
 }
