@@ -110,19 +110,18 @@ pub fn resume(
         )
         .with_context(|| format!("cannot resume from {}", file.display()))?;
     super::commands::interrupted(&report, Some(file), written);
-    super::commands::print_report(model, &report, json)?;
-    if !json {
-        crate::app::output::print_line(format_args!(
-            "resumed          from {} at step {}",
-            file.display(),
-            checkpoint.step
-        ))?;
-        if let Some(step) = written {
-            crate::app::output::print_line(format_args!(
-                "checkpoint       {} at step {step}",
-                file.display()
-            ))?;
-        }
+    let mut notes = vec![format!(
+        "resumed          from {} at step {}",
+        file.display(),
+        checkpoint.step
+    )];
+    if let Some(step) = written {
+        notes.push(format!(
+            "checkpoint       {} at step {step}",
+            file.display()
+        ));
     }
+    // The summary still ends with the hash.
+    super::commands::print_report(model, &report, json, &notes)?;
     Ok(())
 }

@@ -47,13 +47,14 @@ pub fn run(
             path.display()
         );
     }
-    print_report(model, &report, json)?;
-    if let (Some(plan), Some(step), false) = (checkpoint, written, json) {
-        crate::app::output::print_line(format_args!(
+    let notes: Vec<String> = match (checkpoint, written) {
+        (Some(plan), Some(step)) => vec![format!(
             "checkpoint       {} at step {step}",
             plan.path.display()
-        ))?;
-    }
+        )],
+        _ => Vec::new(),
+    };
+    print_report(model, &report, json, &notes)?;
     Ok(report)
 }
 
@@ -83,8 +84,14 @@ pub fn interrupted(
     std::process::exit(i32::from(super::interrupt::exit_status()));
 }
 
-/// Prints a run's report: JSON, or the summary ending with the `hash` line.
-pub fn print_report(model: &dyn RegisteredModel, report: &ModelReport, json: bool) -> Result<()> {
+/// Prints a run's report: JSON, or the summary ending with the `hash` line (`notes`, such
+/// as where a checkpoint was written, go just before it).
+pub fn print_report(
+    model: &dyn RegisteredModel,
+    report: &ModelReport,
+    json: bool,
+    notes: &[String],
+) -> Result<()> {
     if json {
         crate::app::output::print_line(format_args!("{}", serde_json::to_string_pretty(&report)?))?;
         return Ok(());
@@ -131,6 +138,9 @@ pub fn print_report(model: &dyn RegisteredModel, report: &ModelReport, json: boo
             k.counters.total.cells_recomputed,
             k.counters.total.messages_sent + k.counters.total.anti_messages_sent
         ))?;
+    }
+    for note in notes {
+        crate::app::output::print_line(format_args!("{note}"))?;
     }
     crate::app::output::print_line(format_args!("hash             {}", report.hash))?;
     Ok(())

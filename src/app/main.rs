@@ -61,33 +61,46 @@ pub struct ModelArgs {
     pub seed: u64,
 }
 
-/// The kernel's options.
+/// The kernel's options (optional, so that a run on the reference executor, which has no
+/// worlds, can refuse them when given).
 #[derive(Debug, Args, Clone)]
 pub struct KernelArgs {
-    /// Worlds.
-    #[arg(long, value_name = "N", default_value_t = 8, value_parser = clap::value_parser!(u64).range(1..=4096))]
-    pub worlds: u64,
+    /// Worlds [default: 8].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=4096))]
+    pub worlds: Option<u64>,
     /// Optimism window: W steps, or `auto` (`auto:W`): each world adapts its own up to 64 (W)
-    /// by its rollbacks.
-    #[arg(long, value_name = "W", default_value = "16")]
-    pub window: crate::kernel::WindowSpec,
-    /// Partitioner: blocks, kmeans or random.
-    #[arg(long, value_name = "P", default_value = "blocks")]
-    pub partition: String,
+    /// by its rollbacks [default: 16].
+    #[arg(long, value_name = "W")]
+    pub window: Option<crate::kernel::WindowSpec>,
+    /// Partitioner: blocks, kmeans or random [default: blocks].
+    #[arg(long, value_name = "P")]
+    pub partition: Option<String>,
 }
 
 impl KernelArgs {
     fn config(&self) -> Result<KernelConfig> {
-        let partition: PartitionKind = self.partition.parse().map_err(|_| {
-            anyhow!(
-                "--partition {}: use blocks, kmeans or random",
-                self.partition
-            )
-        })?;
-        Ok(self
-            .window
-            .apply(KernelConfig::new(self.worlds as usize))
+        let partition: PartitionKind = match &self.partition {
+            None => PartitionKind::Blocks,
+            Some(p) => p
+                .parse()
+                .map_err(|_| anyhow!("--partition {p}: use blocks, kmeans or random"))?,
+        };
+        let window = self.window.unwrap_or(crate::kernel::WindowSpec::Fixed(16));
+        Ok(window
+            .apply(KernelConfig::new(self.worlds.unwrap_or(8) as usize))
             .partition(partition))
+    }
+
+    /// The first kernel option given on the command line, if any.
+    fn given(&self) -> Option<&'static str> {
+        [
+            ("--worlds", self.worlds.is_some()),
+            ("--window", self.window.is_some()),
+            ("--partition", self.partition.is_some()),
+        ]
+        .into_iter()
+        .find(|f| f.1)
+        .map(|f| f.0)
     }
 }
 
@@ -101,9 +114,9 @@ struct RunArgs {
     /// Executor: reference, virtual or threaded.
     #[arg(long, value_name = "E", default_value = "reference")]
     executor: String,
-    /// Rollback mode: cell, world or conservative.
-    #[arg(long, value_name = "M", default_value = "cell")]
-    mode: String,
+    /// Rollback mode: cell, world or conservative [default: cell].
+    #[arg(long, value_name = "M")]
+    mode: Option<String>,
     /// Threads of the threaded executor [default: the available cores].
     #[arg(long, value_name = "T")]
     threads: Option<usize>,
@@ -240,9 +253,34 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
         Command::Run(a) => {
             let (m, size) = model(registry, &a.model)?;
             let executor: ExecutorKind = a.executor.parse()?;
+            // As for the rigid-body runs: options of parts the executor lacks are refused,
+            // not silently ignored.
+            let kernel_flag = a
+                .mode
+                .as_ref()
+                .map(|_| "--mode")
+                .or_else(|| a.kernel.given());
+            if let (ExecutorKind::Reference, Some(flag)) = (executor, kernel_flag) {
+                bail!(
+                    "{flag} configures the Time Warp worlds, which the reference executor does \
+                     not have: add `--executor virtual` or `--executor threaded`"
+                );
+            }
+            if a.threads.is_some()
+                && executor != ExecutorKind::Threaded
+                && executor != ExecutorKind::Mpi
+            {
+                bail!(
+                    "--threads applies to the threaded and MPI executors only: add `--executor \
+                     threaded` (or, under mpirun, `--executor mpi`)"
+                );
+            }
             let options = RunOptions {
                 executor,
-                kernel: a.kernel.config()?.mode(parse_mode(&a.mode)?),
+                kernel: a
+                    .kernel
+                    .config()?
+                    .mode(parse_mode(a.mode.as_deref().unwrap_or("cell"))?),
                 threads: threads(a.threads),
                 ..RunOptions::default()
             };

@@ -328,16 +328,12 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         );
     }
     let steps = last_step - first_step;
-    if steps == 0 && checkpoint.is_some() {
+    // A fresh run asked for a checkpoint must compute a step to write one (a resumed run at
+    // its last step already has its checkpoint: the file it resumed from).
+    if steps == 0 && checkpoint.is_some() && from.is_none() {
         bail!(
-            "--checkpoint: the run computes no step (--steps {last_step}{}), so no checkpoint \
-             would be written: give --steps {} or more",
-            if first_step > 0 {
-                " is the checkpoint's own step"
-            } else {
-                ""
-            },
-            first_step + 1
+            "--checkpoint: the run computes no step (--steps 0), so no checkpoint would be \
+             written: give --steps 1 or more"
         );
     }
     // Every entry is checked against the scene (from step 1: a resumed run's script is the
