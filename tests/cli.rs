@@ -1104,6 +1104,43 @@ fn example_models_run_verify_and_experiment_from_the_cli() {
     );
 }
 
+#[test]
+fn model_runs_refuse_kernel_options_on_the_reference_and_end_their_summary_with_the_hash() {
+    for flag in [["--mode", "world"], ["--worlds", "3"], ["--threads", "2"]] {
+        let err = fails(
+            &[
+                &["run", "--model", "epidemic", "--steps", "5"][..],
+                &flag[..],
+            ]
+            .concat(),
+        );
+        assert!(err.contains(flag[0]) && err.contains("--executor"), "{err}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let ckpt = dir.path().join("e.ckpt");
+    let ckpt = ckpt.to_str().unwrap();
+    for args in [
+        vec![
+            "run",
+            "--model",
+            "epidemic",
+            "--steps",
+            "20",
+            "--checkpoint",
+            ckpt,
+        ],
+        vec!["resume", ckpt, "--steps", "30"],
+    ] {
+        let out = ok(&args);
+        let last = out.lines().last().unwrap_or("");
+        assert!(
+            last.starts_with("hash "),
+            "{args:?}: the summary ends with `{last}`"
+        );
+        assert!(out.contains("checkpoint       "), "{out}");
+    }
+}
+
 #[cfg(not(feature = "mpi"))]
 #[test]
 fn the_mpi_executor_asks_for_a_build_with_the_mpi_feature() {
