@@ -160,6 +160,15 @@ fn nan_time_step_is_rejected_naming_the_field() {
 }
 
 #[test]
+fn an_extreme_density_is_blamed_for_a_mass_f32_cannot_hold() {
+    let text = variant(
+        "radius = 0.5 }",
+        "radius = 0.5 }\nmaterial = { density = 1e-40 }",
+    );
+    expect_invalid(&text, "bodies[1].material.density", &["1e-40", "mass"]);
+}
+
+#[test]
 fn negative_radius_is_rejected_naming_the_field() {
     let text = variant("radius = 0.5", "radius = -0.5");
     expect_invalid(&text, "bodies[1].shape.radius", &["-0.5", "greater than 0"]);

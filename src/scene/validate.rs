@@ -357,14 +357,17 @@ fn check_body(
         probe.inv_inertia().z,
     ];
     if !inverse.iter().all(|v| v.is_finite() && *v > 0.0) {
-        return Err(c.fail(
-            f("shape"),
-            b.shape,
-            &format!(
-                "the mass ({} kg) and moments of inertia derived from the size and density must be finite and non-zero in f32 (the body is too small or too large)",
-                b.material.density * b.shape.volume()
-            ),
-        ));
+        let message = format!(
+            "the mass ({:e} kg) and moments of inertia derived from the size and density must be finite and non-zero in f32 (the body is too small or too large, or its density too extreme)",
+            b.material.density * b.shape.volume()
+        );
+        // The density is to blame when it is far outside any material's (air's ~1 kg/m³ to
+        // osmium's 22,600); otherwise the size.
+        return Err(if (1e-3..=1e5).contains(&b.material.density) {
+            c.fail(f("shape"), b.shape, &message)
+        } else {
+            c.fail(f("material.density"), b.material.density, &message)
+        });
     }
     c.range(
         Lazy(|| f("material.friction")),
