@@ -4,7 +4,7 @@
 
 mod cli_support;
 
-use cli_support::{fails, hash_of, ok};
+use cli_support::{fails, hash_of, ok, soda};
 use soda::prelude::*;
 use soda::scene::{parse_inputs, SceneBuilder, SceneFormat};
 use soda::{Body, RigidBodyModel};
@@ -158,6 +158,12 @@ fn bad_input_scripts_are_refused_naming_the_entry_and_field() {
             "position = [0.0, 900.0, 0.0]",
             "inside the domain",
         ),
+        // Into the ground (a scene's body may overlap it by 1 mm at most; so may a spawn).
+        (
+            "position = [0.0, 9.0, 0.0]",
+            "position = [0.0, 0.3, 0.0]",
+            "inputs[1].body.position` = [0.0, 0.3, 0.0] is invalid: the body overlaps the static environment by 0.2000 m",
+        ),
         (
             "action = \"remove\"",
             "action = \"explode\"",
@@ -257,4 +263,27 @@ fn push_changes_momentum_by_the_impulse_and_set_velocity_sets_it() {
     let hash = |bodies: &[Body]| soda::state::canonical_hash::<RigidBodyModel>(bodies.iter());
     let threaded = state_at(5, RunOptions::threaded(KernelConfig::new(2), 2));
     assert_eq!(hash(&threaded), hash(&after));
+}
+
+/// Entries after the run's last step are valid (a longer run applies them) but say so.
+#[test]
+fn inputs_after_the_last_step_are_named_in_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(&dir, "late.toml", SCRIPT);
+    let out = soda(&[
+        "run",
+        "--objects",
+        "300",
+        "--steps",
+        "40",
+        "--inputs",
+        &path,
+    ]);
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("3 of its inputs (the first: inputs[1] at step 45)")
+            && err.contains("give --steps 70"),
+        "{err}"
+    );
 }

@@ -344,6 +344,23 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         .into_iter()
         .filter(|(step, _)| *step > first_step)
         .collect();
+    // Entries after the last step are valid (a longer run applies them) but do nothing here.
+    let late: Vec<usize> = (0..script.inputs.len())
+        .filter(|&i| script.inputs[i].step > last_step)
+        .collect();
+    if let Some(&first) = late.first() {
+        eprintln!(
+            "warning: `{}`: {} of its inputs (the first: inputs[{first}] at step {}) come after \
+             the run's last step {last_step} and do not apply; give --steps {} to apply them",
+            script_origin.0,
+            late.len(),
+            script.inputs[first].step,
+            late.iter()
+                .map(|&i| script.inputs[i].step)
+                .max()
+                .unwrap_or(last_step)
+        );
+    }
     let grid = scene.grid();
     // The bodies at the first step: the scene's inside the grid, or the checkpoint's.
     let mut initial: Vec<Body> = match &from {

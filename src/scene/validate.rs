@@ -448,6 +448,16 @@ pub fn validate_added_body(
             ),
         ));
     }
+    // As for a scene's bodies: not into the static environment (the other bodies' places at
+    // that step are not known before the run; the solver separates those).
+    let p = environment_penetration(&b.to_body(), &scene.model().environment);
+    if p > OVERLAP_TOLERANCE {
+        return Err(c.fail(
+            f("position"),
+            b.position,
+            &format!("the body overlaps the static environment by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move it clear"),
+        ));
+    }
     Ok(())
 }
 
