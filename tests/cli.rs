@@ -276,6 +276,12 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "solver.max_angular_speed` = 1e22 is invalid: must be greater than 0 and at most 1e6 rad/s",
         ),
         (
+            "static.toml",
+            "[domain]",
+            "[[environment.cuboids]]\nposition = [50.0, 1.0, 2.0]\nhalf_extents = [1.0, 1.0, 1.0]\n\n[domain]",
+            "environment.cuboids[0].position` = [50.0, 1.0, 2.0] is invalid: the static box lies wholly outside the domain",
+        ),
+        (
             "gravity.toml",
             "[domain]",
             "gravity = [0.0, -3e38, 0.0]\n\n[domain]",

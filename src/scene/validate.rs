@@ -239,6 +239,28 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         for (k, &h) in sc.half_extents.iter().enumerate() {
             c.positive(&format!("environment.cuboids[{i}].half_extents[{k}]"), h)?;
         }
+        // Wholly outside the domain (beyond its bounding sphere), no body can ever touch it:
+        // most likely a coordinate mistyped.
+        let outside: f64 = (0..3)
+            .map(|k| {
+                let x = f64::from(sc.position[k]);
+                let gap = (f64::from(scene.domain.min[k]) - x)
+                    .max(x - f64::from(scene.domain.max[k]))
+                    .max(0.0);
+                gap * gap
+            })
+            .sum::<f64>()
+            .sqrt();
+        if outside > length(sc.half_extents) {
+            return Err(c.fail(
+                &format!("environment.cuboids[{i}].position"),
+                sc.position,
+                &format!(
+                    "the static box lies wholly outside the domain ({:?} to {:?}), where no body can touch it: move it inside or remove it",
+                    scene.domain.min, scene.domain.max
+                ),
+            ));
+        }
     }
 
     let extent = [0, 1, 2].map(|k| scene.domain.max[k] - scene.domain.min[k]);
