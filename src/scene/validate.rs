@@ -253,7 +253,7 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
             .sqrt();
         if outside > length(sc.half_extents) {
             return Err(c.fail(
-                &format!("environment.cuboids[{i}].position"),
+                format!("environment.cuboids[{i}].position"),
                 sc.position,
                 &format!(
                     "the static box lies wholly outside the domain ({:?} to {:?}), where no body can touch it: move it inside or remove it",
