@@ -279,7 +279,7 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "static.toml",
             "[domain]",
             "[[environment.cuboids]]\nposition = [50.0, 1.0, 2.0]\nhalf_extents = [1.0, 1.0, 1.0]\n\n[domain]",
-            "environment.cuboids[0].position` = [50.0, 1.0, 2.0] is invalid: the static box lies wholly outside the domain",
+            "environment.cuboids[0].position` = [50.0, 1.0, 2.0] is invalid: the static box lies outside the domain",
         ),
         (
             "gravity.toml",

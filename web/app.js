@@ -391,8 +391,8 @@ function ballLevel(x, y, z, radius, v, perPixel) {
 }
 
 // Writes the bodies of frame f that the camera can see (all with `?cull=0`) straight from
-// its bytes into the meshes' vertex arrays. Runs for every frame drawn and whenever the
-// camera moves: what is hidden depends on both.
+// its bytes into the meshes' vertex arrays. Runs for every frame whose bodies changed and
+// whenever the camera moves or the canvas changes size: what is hidden depends on them all.
 function placeBodies(f) {
   const n = f.bodies;
   const u8 = new Uint8Array(f.view.buffer, f.bodyOffset, n * BODY);
@@ -641,8 +641,9 @@ soda.screenPointOf = (id) => {
 };
 
 // --- render loop ------------------------------------------------------------------------------
-// The page draws when a new frame came, the camera moved, a flash fades or the page was
-// resized, not on every animation frame. Its own cost is in window.sodaStats: animation
+// The page draws when a frame with changed bodies came, the camera moved, a flash fades or
+// the page was resized, not on every animation frame (a frame whose bodies did not change is
+// shown by the picture already on the canvas). Its own cost is in window.sodaStats: animation
 // frames per second, frames drawn per second, the page's JS per frame drawn (decoding, culling, vertex writing) and render ms per frame
 // (averages), and the render scale: the canvas has scale × the CSS pixels. With `auto`
 // (the default; `?scale=0.5` fixes it), the scale drops a step each second the page draws
@@ -657,6 +658,9 @@ const stats = {
 window.sodaStats = stats;
 const SCALES = [1, 0.85, 0.7, 0.6, 0.5, 0.42, 0.35, 0.3, 0.25];
 let needRender = true;
+// The bodies are placed again when a new frame came, the camera moved, the page or the render
+// scale changed size (a ball's level of detail depends on the canvas), or the selection changed.
+let placeAgain = false, placedSelected = null;
 function resize() {
   const w = host.clientWidth, h = host.clientHeight;
   renderer.setPixelRatio(Math.min(1, window.devicePixelRatio) * stats.scale);
@@ -665,6 +669,7 @@ function resize() {
   camera.aspect = w / Math.max(1, h); camera.updateProjectionMatrix();
   stats.pixels = `${w}×${h}`;
   needRender = true;
+  placeAgain = true;
 }
 window.addEventListener('resize', resize);
 controls.addEventListener('change', () => { needRender = true; });
@@ -686,13 +691,11 @@ function adapt(now) {
   if (!panelFrame && soda.shown) panelFrame = lastFrame;
 }
 let lastFrame = null;
-// The bodies are placed again when a new frame came or the camera moved or the page resized,
-// or the selected body changed. A frame whose bodies are byte for byte those of the frame
+// A frame whose bodies are byte for byte those of the frame
 // placed last (a pile at rest: every body asleep) leaves the meshes as they are and, with no
 // flash fading and the camera still, needs no render either: the picture on the canvas is
 // already that frame's, pixel for pixel, and the software GL's time goes to frames that
 // change.
-let placeAgain = false, placedSelected = null;
 function sameBodies(a, b) {
   if (!a || a.bodies !== b.bodies) return false;
   const words = a.bodies * (BODY / 4);

@@ -284,6 +284,12 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                 threads: threads(a.threads),
                 ..RunOptions::default()
             };
+            if a.steps == 0 && a.checkpoint.is_some() {
+                bail!(
+                    "--checkpoint: the run computes no step (--steps 0), so no checkpoint would \
+                     be written: give --steps 1 or more"
+                );
+            }
             let checkpoint = match &a.checkpoint {
                 Some(path) => Some(super::checkpoint::CheckpointPlan::checked(
                     path,

@@ -311,6 +311,14 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
              has none; add --executor virtual or --executor threaded"
         );
     }
+    // A fresh run asked for a checkpoint must compute a step to write one (checked on every MPI rank alike) (a resumed run at
+    // its last step already has its checkpoint: the file it resumed from).
+    if last_step == 0 && checkpoint.is_some() && from.is_none() {
+        bail!(
+            "--checkpoint: the run computes no step (--steps 0), so no checkpoint would be \
+             written: give --steps 1 or more"
+        );
+    }
     // Under MPI every rank runs this; only rank 0 writes outputs and prints.
     let role = super::mpi::Role::of(&options)?;
     let quiet_outputs;
@@ -328,14 +336,6 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         );
     }
     let steps = last_step - first_step;
-    // A fresh run asked for a checkpoint must compute a step to write one (a resumed run at
-    // its last step already has its checkpoint: the file it resumed from).
-    if steps == 0 && checkpoint.is_some() && from.is_none() {
-        bail!(
-            "--checkpoint: the run computes no step (--steps 0), so no checkpoint would be \
-             written: give --steps 1 or more"
-        );
-    }
     // Every entry is checked against the scene (from step 1: a resumed run's script is the
     // whole run's); those a checkpoint already holds the effect of are dropped.
     let inputs: Vec<_> = script
@@ -348,7 +348,7 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
     let late: Vec<usize> = (0..script.inputs.len())
         .filter(|&i| script.inputs[i].step > last_step)
         .collect();
-    if let Some(&first) = late.first() {
+    if let (Some(&first), true) = (late.first(), role.root()) {
         eprintln!(
             "warning: `{}`: {} of its inputs (the first: inputs[{first}] at step {}) come after \
              the run's last step {last_step} and do not apply; give --steps {} to apply them",

@@ -163,6 +163,10 @@ pub struct RunTrace {
     pub recomputed_cells: Vec<(u32, u64)>,
 }
 
+/// The most worlds a trace may name ([`RunTrace::check`]): far more than any run has, and a
+/// bound on what drawing it allocates per world.
+pub const MAX_TRACE_WORLDS: usize = 1 << 20;
+
 /// A trace read from a file that does not describe a run ([`RunTrace::check`]).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("field `{field}` = {value} is invalid: {allowed}")]
@@ -189,11 +193,11 @@ impl RunTrace {
                 allowed,
             })
         };
-        if self.worlds == 0 {
+        if self.worlds == 0 || self.worlds > MAX_TRACE_WORLDS {
             return bad(
                 "worlds".into(),
-                "0".into(),
-                "a run has 1 world or more".into(),
+                self.worlds.to_string(),
+                format!("a run has 1 to {MAX_TRACE_WORLDS} worlds"),
             );
         }
         if self.grid.iter().any(|&n| n < 1) {
@@ -203,14 +207,16 @@ impl RunTrace {
                 "every dimension must be 1 or more".into(),
             );
         }
-        let cells: u64 = self.grid.iter().map(|&n| n as u64).product();
-        if cells > Grid::MAX_CELLS as u64 {
+        // In u128: three i32 dimensions cannot overflow it.
+        let cells: u128 = self.grid.iter().map(|&n| n as u128).product();
+        if cells > Grid::MAX_CELLS as u128 {
             return bad(
                 "grid".into(),
                 format!("{:?}", self.grid),
                 format!("at most {} cells", Grid::MAX_CELLS),
             );
         }
+        let cells = cells as u64;
         if self.owners.len() as u64 != cells {
             return bad(
                 "owners".into(),

@@ -132,6 +132,8 @@ impl InputScript {
             };
         let mut out = Vec::with_capacity(order.len());
         let largest = scene.max_radius();
+        // Built at the first spawn, for all of them.
+        let mut environment: Option<crate::physics::Environment> = None;
         for i in order {
             let e = &self.inputs[i];
             if e.step < first_step.max(1) {
@@ -209,6 +211,7 @@ impl InputScript {
                         origin,
                         &format!("inputs[{i}].body"),
                         largest,
+                        environment.get_or_insert_with(|| scene.model().environment),
                     )?;
                     if let Some((from, None)) = presence.ids.get(&body.id) {
                         return Err(fail(
@@ -281,7 +284,9 @@ impl InputScript {
                             if let Some(spec) = specs.get(&id) {
                                 let b = spec.to_body();
                                 let dv = length(impulse) * f64::from(b.inv_mass());
-                                if dv > f64::from(scene.solver.max_speed) {
+                                // A relative ulp or so over (an impulse built in f32 for
+                                // exactly the cap, as the viewer's pushes are) is the cap.
+                                if dv > f64::from(scene.solver.max_speed) * (1.0 + 1e-5) {
                                     return Err(fail(
                                         i,
                                         "impulse",
@@ -295,7 +300,7 @@ impl InputScript {
                                 }
                                 let most = b.inv_inertia().max();
                                 let dw = length(angular) * f64::from(most);
-                                if dw > f64::from(scene.solver.max_angular_speed) {
+                                if dw > f64::from(scene.solver.max_angular_speed) * (1.0 + 1e-5) {
                                     return Err(fail(
                                         i,
                                         "angular_impulse",

@@ -3,7 +3,7 @@
 use super::{BodySpec, Scene, SceneError};
 use crate::grid::Grid;
 use crate::physics::metrics::{environment_penetration, pair_penetration};
-use crate::physics::{RigidBodyModel, Shape};
+use crate::physics::{Environment, RigidBodyModel, Shape};
 use crate::state::CellStates;
 
 /// The largest `solver.max_angular_speed` a scene may set, rad/s: far above any rigid body's,
@@ -233,14 +233,16 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         1.0,
         "must be between 0 and 1",
     )?;
+    let body_reach = f64::from(scene.max_radius()) + f64::from(scene.solver.margin);
     for (i, sc) in env.cuboids.iter().enumerate() {
         c.finite(&format!("environment.cuboids[{i}].position"), &sc.position)?;
         c.finite(&format!("environment.cuboids[{i}].rotation"), &sc.rotation)?;
         for (k, &h) in sc.half_extents.iter().enumerate() {
             c.positive(&format!("environment.cuboids[{i}].half_extents[{k}]"), h)?;
         }
-        // Wholly outside the domain (beyond its bounding sphere), no body can ever touch it:
-        // most likely a coordinate mistyped.
+        // Wholly out of reach (a body's centre stays in the domain, its surface up to the
+        // largest body's radius and the contact margin beyond): most likely a coordinate
+        // mistyped.
         let outside: f64 = (0..3)
             .map(|k| {
                 let x = f64::from(sc.position[k]);
@@ -251,12 +253,13 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
             })
             .sum::<f64>()
             .sqrt();
-        if outside > length(sc.half_extents) {
+        let reach = length(sc.half_extents) + body_reach;
+        if outside > reach {
             return Err(c.fail(
                 format!("environment.cuboids[{i}].position"),
                 sc.position,
                 &format!(
-                    "the static box lies wholly outside the domain ({:?} to {:?}), where no body can touch it: move it inside or remove it",
+                    "the static box lies outside the domain ({:?} to {:?}) beyond any body's reach: move it inside or remove it",
                     scene.domain.min, scene.domain.max
                 ),
             ));
@@ -447,14 +450,17 @@ fn check_body(
 /// Checks a body added to `scene` during a run (an input): the rules of a scene's body, an
 /// id not in `in_use`, and no bigger than the scene's largest body (the grid's cell edge was
 /// sized for that one, SPEC.md §3). `field` names the body in messages (`inputs[3].body`);
-/// `largest` is the scene's [`Scene::max_radius`], passed in so that checking many added
-/// bodies against a large scene does not measure it each time.
+/// `largest` is the scene's [`Scene::max_radius`] and `environment` its static environment
+/// (`scene.model().environment`), passed in so that checking many added bodies against a
+/// large scene does not measure it or build them each time. An added body must not overlap
+/// the environment by more than [`OVERLAP_TOLERANCE`].
 pub fn validate_added_body(
     scene: &Scene,
     b: &BodySpec,
     origin: &str,
     field: &str,
     largest: f32,
+    environment: &Environment,
 ) -> Result<(), SceneError> {
     let c = Checker { origin };
     let extent = [0, 1, 2].map(|k| scene.domain.max[k] - scene.domain.min[k]);
@@ -472,7 +478,7 @@ pub fn validate_added_body(
     }
     // As for a scene's bodies: not into the static environment (the other bodies' places at
     // that step are not known before the run; the solver separates those).
-    let p = environment_penetration(&b.to_body(), &scene.model().environment);
+    let p = environment_penetration(&b.to_body(), environment);
     if p > OVERLAP_TOLERANCE {
         return Err(c.fail(
             f("position"),
