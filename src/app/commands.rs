@@ -263,24 +263,28 @@ pub fn granularity(
     Ok(())
 }
 
+/// Reads a trace written by `run --trace` and checks it ([`crate::kernel::RunTrace::check`]):
+/// a file that is not one, or an edited one, is an error naming the file (and the field).
+pub fn read_trace(path: &Path) -> Result<crate::kernel::RunTrace> {
+    use anyhow::Context;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the trace {}", path.display()))?;
+    let not_a_trace = || {
+        format!(
+            "{} is not a trace written by `soda run --trace` (or a model binary's `run --trace`)",
+            path.display()
+        )
+    };
+    let trace: crate::kernel::RunTrace = serde_json::from_str(&text).with_context(not_a_trace)?;
+    trace.check().with_context(not_a_trace)?;
+    Ok(trace)
+}
+
 /// `plot TRACE --out DIR`: the space-time diagram, the territory map and the rollback heat
 /// map of a trace written by `run --trace` (any model), as SVG files.
 pub fn plot(trace: &Path, out: &Path) -> Result<()> {
     use anyhow::Context;
-    let text = std::fs::read_to_string(trace)
-        .with_context(|| format!("cannot read the trace {}", trace.display()))?;
-    let t: crate::kernel::RunTrace = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{} is not a trace written by `run --trace`",
-            trace.display()
-        )
-    })?;
-    t.check().with_context(|| {
-        format!(
-            "{} is not a trace written by `run --trace`",
-            trace.display()
-        )
-    })?;
+    let t = read_trace(trace)?;
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create the directory {}", out.display()))?;
     for (name, draw) in [

@@ -260,21 +260,7 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                 .as_ref()
                 .map(|_| "--mode")
                 .or_else(|| a.kernel.given());
-            if let (ExecutorKind::Reference, Some(flag)) = (executor, kernel_flag) {
-                bail!(
-                    "{flag} configures the Time Warp worlds, which the reference executor does \
-                     not have: add `--executor virtual` or `--executor threaded`"
-                );
-            }
-            if a.threads.is_some()
-                && executor != ExecutorKind::Threaded
-                && executor != ExecutorKind::Mpi
-            {
-                bail!(
-                    "--threads applies to the threaded and MPI executors only: add `--executor \
-                     threaded` (or, under mpirun, `--executor mpi`)"
-                );
-            }
+            check_executor_options(executor, kernel_flag, a.threads.is_some())?;
             let options = RunOptions {
                 executor,
                 kernel: a
@@ -405,6 +391,30 @@ pub fn main_with(registry: Registry) -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// Refuses options of parts `executor` lacks, for every command line that runs one:
+/// `kernel_flag`, the first Time Warp option given (`--mode`, `--worlds`, ...), with the
+/// reference executor (it has no worlds), and `--threads` (`threads_given`) with any but the
+/// threaded and MPI executors.
+pub fn check_executor_options(
+    executor: ExecutorKind,
+    kernel_flag: Option<&str>,
+    threads_given: bool,
+) -> Result<()> {
+    if let (ExecutorKind::Reference, Some(flag)) = (executor, kernel_flag) {
+        bail!(
+            "{flag} configures the Time Warp worlds, which the reference executor does not \
+             have: add `--executor virtual` or `--executor threaded`"
+        );
+    }
+    if threads_given && executor != ExecutorKind::Threaded && executor != ExecutorKind::Mpi {
+        bail!(
+            "--threads applies to the threaded and MPI executors only: add `--executor \
+             threaded` (or, under mpirun, `--executor mpi`)"
+        );
+    }
+    Ok(())
 }
 
 /// Runs one parsed command line against `registry` (for a binary that has its own parser

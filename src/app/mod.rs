@@ -27,5 +27,5 @@ mod main;
 pub mod output;
 mod registry;
 
-pub use main::{main_with, run_with, ModelCli};
+pub use main::{check_executor_options, main_with, run_with, ModelCli};
 pub use registry::{ModelSize, RegisteredModel, Registry};

@@ -251,23 +251,11 @@ impl ExecutorArgs {
                 );
             }
         }
-        if executor == ExecutorKind::Reference {
-            if let Some((flag, _)) = kernel_flags.iter().find(|f| f.1) {
-                bail!(
-                    "{flag} configures the Time Warp worlds, which the reference executor does \
-                     not have: add `--executor virtual` or `--executor threaded`"
-                );
-            }
-        }
-        if self.threads.is_some()
-            && executor != ExecutorKind::Threaded
-            && executor != ExecutorKind::Mpi
-        {
-            bail!(
-                "--threads applies to the threaded and MPI executors only: add `--executor \
-                 threaded` (or, under mpirun, `--executor mpi`)"
-            );
-        }
+        soda::app::check_executor_options(
+            executor,
+            kernel_flags.iter().find(|f| f.1).map(|f| f.0),
+            self.threads.is_some(),
+        )?;
         if self.lead.is_some() && executor != ExecutorKind::Threaded {
             bail!(
                 "--lead paces the threaded executor's worlds: add `--executor threaded` (the \

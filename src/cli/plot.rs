@@ -1,9 +1,8 @@
 //! `soda plot`: charts of a trace written by `soda run --trace`.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use soda::app::charts;
-use soda::kernel::RunTrace;
 use std::path::PathBuf;
 
 /// Examples shown after `soda plot --help`.
@@ -26,20 +25,7 @@ pub struct PlotArgs {
 
 /// Runs the command: reads the trace and writes the three SVG charts.
 pub fn plot(args: &PlotArgs) -> Result<()> {
-    let text = std::fs::read_to_string(&args.trace)
-        .with_context(|| format!("cannot read the trace {}", args.trace.display()))?;
-    let trace: RunTrace = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{} is not a trace written by `soda run --trace`",
-            args.trace.display()
-        )
-    })?;
-    trace.check().with_context(|| {
-        format!(
-            "{} is not a trace written by `soda run --trace`",
-            args.trace.display()
-        )
-    })?;
+    let trace = soda::app::commands::read_trace(&args.trace)?;
     let mut plan = super::plan::OutputPlan::new();
     plan.input("the trace", &args.trace);
     plan.dir("--out", &args.out)?;

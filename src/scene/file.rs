@@ -81,15 +81,18 @@ pub fn parse_scene(text: &str, format: SceneFormat, origin: &str) -> Result<Scen
 /// (`at `bodies[0].material.density``), the line and column, and shows the line.
 pub(crate) fn from_toml<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
     let de = toml::Deserializer::parse(text).map_err(|e| toml_message(&e, text))?;
-    serde_path_to_error::deserialize(de).map_err(|e| {
-        let path = e.path().to_string();
-        let message = toml_message(e.inner(), text);
-        if path.is_empty() || path == "." {
-            message
-        } else {
-            format!("at `{path}`: {message}")
-        }
-    })
+    serde_path_to_error::deserialize(de)
+        .map_err(|e| at_path(e.path(), toml_message(e.inner(), text)))
+}
+
+/// A parser's `message` prefixed with the field's path, unless the error is at the top.
+fn at_path(path: &serde_path_to_error::Path, message: String) -> String {
+    let path = path.to_string();
+    if path.is_empty() || path == "." {
+        message
+    } else {
+        format!("at `{path}`: {message}")
+    }
 }
 
 /// The TOML parser's message, with the line and column when it has a location.
@@ -129,15 +132,8 @@ pub(crate) fn from_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T,
         );
     }
     let mut de = serde_json::Deserializer::from_str(text);
-    let value = serde_path_to_error::deserialize(&mut de).map_err(|e| {
-        let path = e.path().to_string();
-        let message = json_message(e.inner(), text);
-        if path.is_empty() || path == "." {
-            message
-        } else {
-            format!("at `{path}`: {message}")
-        }
-    })?;
+    let value = serde_path_to_error::deserialize(&mut de)
+        .map_err(|e| at_path(e.path(), json_message(e.inner(), text)))?;
     de.end().map_err(|e| json_message(&e, text))?;
     Ok(value)
 }

@@ -4,7 +4,7 @@
 //! kernel inputs that every executor applies with the same bits (SPEC.md §8, §7).
 
 use super::file::{from_json, from_toml};
-use super::validate::{length, validate_added_body};
+use super::validate::{length, over_speed_cap, over_spin_cap, validate_added_body};
 use super::{BodySpec, Scene, SceneError, SceneFormat};
 use crate::kernel::{Edit, Input};
 use crate::math::Vec3;
@@ -319,29 +319,13 @@ impl InputScript {
                             required("velocity", e.velocity.is_some())?;
                             let velocity = e.velocity.expect("checked");
                             finite("velocity", velocity)?;
-                            if length(velocity) > f64::from(scene.solver.max_speed) {
-                                return Err(fail(
-                                    i,
-                                    "velocity",
-                                    format!("{velocity:?}"),
-                                    format!(
-                                        "speed must not exceed solver.max_speed = {} m/s",
-                                        scene.solver.max_speed
-                                    ),
-                                ));
+                            if let Some(why) = over_speed_cap(velocity, &scene.solver) {
+                                return Err(fail(i, "velocity", format!("{velocity:?}"), why));
                             }
                             if let Some(w) = e.angular_velocity {
                                 finite("angular_velocity", w)?;
-                                if length(w) > f64::from(scene.solver.max_angular_speed) {
-                                    return Err(fail(
-                                        i,
-                                        "angular_velocity",
-                                        format!("{w:?}"),
-                                        format!(
-                                            "angular speed must not exceed solver.max_angular_speed = {} rad/s",
-                                            scene.solver.max_angular_speed
-                                        ),
-                                    ));
+                                if let Some(why) = over_spin_cap(w, &scene.solver) {
+                                    return Err(fail(i, "angular_velocity", format!("{w:?}"), why));
                                 }
                             }
                             Input::Edit(

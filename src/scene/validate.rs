@@ -3,7 +3,7 @@
 use super::{BodySpec, Scene, SceneError};
 use crate::grid::Grid;
 use crate::physics::metrics::{environment_penetration, pair_penetration};
-use crate::physics::{Environment, RigidBodyModel, Shape};
+use crate::physics::{Body, Environment, RigidBodyModel, Shape, SolverParams};
 use crate::state::CellStates;
 
 /// The largest `solver.max_angular_speed` a scene may set, rad/s: far above any rigid body's,
@@ -313,12 +313,11 @@ fn check_overlaps(scene: &Scene, grid: &Grid, c: &Checker) -> Result<(), SceneEr
     let bodies = scene.initial_bodies();
     let index_of = |id: u64| scene.bodies.iter().position(|b| b.id == id).unwrap_or(0);
     for b in &bodies {
-        let p = environment_penetration(b, &model.environment);
-        if p > OVERLAP_TOLERANCE {
+        if let Some(why) = into_environment(b, &model.environment) {
             return Err(c.fail(
                 format!("bodies[{}].position", index_of(b.id())),
                 scene.bodies[index_of(b.id())].position,
-                &format!("the body overlaps the static environment by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move it clear"),
+                &why,
             ));
         }
     }
@@ -424,25 +423,11 @@ fn check_body(
             ));
         }
     }
-    if length(b.velocity) > f64::from(s.max_speed) {
-        return Err(c.fail(
-            f("velocity"),
-            b.velocity,
-            &format!(
-                "speed must not exceed solver.max_speed = {} m/s",
-                s.max_speed
-            ),
-        ));
+    if let Some(why) = over_speed_cap(b.velocity, s) {
+        return Err(c.fail(f("velocity"), b.velocity, &why));
     }
-    if length(b.angular_velocity) > f64::from(s.max_angular_speed) {
-        return Err(c.fail(
-            f("angular_velocity"),
-            b.angular_velocity,
-            &format!(
-                "angular speed must not exceed solver.max_angular_speed = {} rad/s",
-                s.max_angular_speed
-            ),
-        ));
+    if let Some(why) = over_spin_cap(b.angular_velocity, s) {
+        return Err(c.fail(f("angular_velocity"), b.angular_velocity, &why));
     }
     Ok(())
 }
@@ -478,15 +463,39 @@ pub fn validate_added_body(
     }
     // As for a scene's bodies: not into the static environment (the other bodies' places at
     // that step are not known before the run; the solver separates those).
-    let p = environment_penetration(&b.to_body(), environment);
-    if p > OVERLAP_TOLERANCE {
-        return Err(c.fail(
-            f("position"),
-            b.position,
-            &format!("the body overlaps the static environment by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move it clear"),
-        ));
+    if let Some(why) = into_environment(&b.to_body(), environment) {
+        return Err(c.fail(f("position"), b.position, &why));
     }
     Ok(())
+}
+
+/// Why body `b` may not start where it is, if it overlaps the static environment by more
+/// than [`OVERLAP_TOLERANCE`] (the rule of a scene's bodies and of added ones alike).
+fn into_environment(b: &Body, environment: &Environment) -> Option<String> {
+    let p = environment_penetration(b, environment);
+    (p > OVERLAP_TOLERANCE).then(|| {
+        format!("the body overlaps the static environment by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move it clear")
+    })
+}
+
+/// Why `velocity` breaks `solver.max_speed`, if it does (scene bodies and inputs alike).
+pub(crate) fn over_speed_cap(velocity: [f32; 3], s: &SolverParams) -> Option<String> {
+    (length(velocity) > f64::from(s.max_speed)).then(|| {
+        format!(
+            "speed must not exceed solver.max_speed = {} m/s",
+            s.max_speed
+        )
+    })
+}
+
+/// Why `angular_velocity` breaks `solver.max_angular_speed`, if it does.
+pub(crate) fn over_spin_cap(angular_velocity: [f32; 3], s: &SolverParams) -> Option<String> {
+    (length(angular_velocity) > f64::from(s.max_angular_speed)).then(|| {
+        format!(
+            "angular speed must not exceed solver.max_angular_speed = {} rad/s",
+            s.max_angular_speed
+        )
+    })
 }
 
 /// The length of `v`, in f64: an f32 norm of a finite vector overflows from about 1.8e19 on
