@@ -66,7 +66,7 @@ impl From<GhostsArg> for GhostPolicy {
 /// `--partition` values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum PartitionArg {
-    /// Axis-aligned blocks.
+    /// Axis-aligned boxes, cut where the bodies balance (recursive bisection).
     Blocks,
     /// The thesis's equal-size k-means over body positions (seeded).
     Kmeans,

@@ -49,7 +49,8 @@ pub enum GhostPolicy {
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum PartitionKind {
-    /// Axis-aligned blocks: the world count factored over the three axes.
+    /// Axis-aligned boxes by recursive bisection, each cut where the bodies' initial
+    /// positions balance (SPEC.md §K2).
     #[default]
     Blocks,
     /// The thesis's setup (§3.2.4): equal-size k-means over body positions (seeded by

@@ -1,6 +1,6 @@
 //! Territories: a map from every cell of the grid to the world that owns it.
 //!
-//! Partitioners: axis-aligned blocks, the thesis's equal-size k-means (§3.2.4), uniformly
+//! Partitioners: axis-aligned blocks balanced by bodies (blocks.rs), the thesis's equal-size k-means (§3.2.4), uniformly
 //! random cells (fragmented territories, for tests) and explicit maps. All are deterministic
 //! for their inputs and seed. A world may own no cell at all.
 
@@ -8,6 +8,8 @@ use super::config::PartitionKind;
 use crate::grid::{CellCoord, Grid};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+
+mod blocks;
 
 /// A world's index, `0..worlds`.
 pub type WorldId = u32;
@@ -45,7 +47,7 @@ impl Partition {
     }
 
     /// Builds the partition `kind` of `grid` into `worlds` worlds; `positions` are the bodies'
-    /// initial positions (used by k-means).
+    /// initial positions (blocks cut where they balance them; k-means clusters them).
     pub fn build(
         kind: &PartitionKind,
         grid: &Grid,
@@ -54,47 +56,11 @@ impl Partition {
         seed: u64,
     ) -> Partition {
         match kind {
-            PartitionKind::Blocks => Self::blocks(grid, worlds),
+            PartitionKind::Blocks => Self::blocks_by_bodies(grid, worlds, positions),
             PartitionKind::KMeans => Self::kmeans(grid, worlds, positions, seed),
             PartitionKind::Random => Self::random(grid, worlds, seed),
             PartitionKind::Explicit(o) => Self::from_owners(grid, worlds, o.clone()),
         }
-    }
-
-    /// Axis-aligned blocks: the prime factors of `worlds`, largest first, are given one by
-    /// one to the axis with the most cells per block; cell `x` of an axis of `n` cells split
-    /// in `f` goes to block `x * f / n`.
-    pub fn blocks(grid: &Grid, worlds: usize) -> Partition {
-        let mut f = [1usize; 3];
-        let mut factors = Vec::new();
-        let mut n = worlds.max(1);
-        let mut p = 2;
-        while n > 1 {
-            while n % p == 0 {
-                factors.push(p);
-                n /= p;
-            }
-            p += 1;
-        }
-        factors.reverse();
-        for p in factors {
-            let axis = (0..3)
-                .max_by(|&a, &b| {
-                    let ra = grid.dims[a] as f64 / f[a] as f64;
-                    let rb = grid.dims[b] as f64 / f[b] as f64;
-                    ra.total_cmp(&rb).then(b.cmp(&a))
-                })
-                .unwrap_or(0);
-            f[axis] *= p;
-        }
-        let owner = (0..grid.cell_count())
-            .map(|i| {
-                let c = grid.coord(i);
-                let b = |v: i32, a: usize| (v as usize * f[a]) / grid.dims[a] as usize;
-                (b(c.x, 0) + f[0] * (b(c.y, 1) + f[1] * b(c.z, 2))) as WorldId
-            })
-            .collect();
-        Self::from_owners(grid, worlds.max(1), owner)
     }
 
     /// Every cell to a uniformly random world.
@@ -235,17 +201,6 @@ mod tests {
 
     fn grid() -> Grid {
         Grid::covering(Vec3::zeros(), Vec3::new(8.0, 4.0, 6.0), 1.0)
-    }
-
-    #[test]
-    fn blocks_cover_every_world_when_axes_allow() {
-        let g = grid();
-        for w in [1, 2, 3, 4, 6, 8, 12, 16] {
-            let p = Partition::blocks(&g, w);
-            for i in 0..w as u32 {
-                assert!(!p.cells_of(i).is_empty(), "{w} worlds: world {i} empty");
-            }
-        }
     }
 
     #[test]
