@@ -9,7 +9,7 @@ use super::environment::{DomainBox, Environment};
 use super::event::EventKind;
 use super::pair::{Edge, PairContact, PairEffect};
 use super::params::SolverParams;
-use super::solver::{approaches, integrate_rotation, solve_body};
+use super::solver::{approaches, integrate_rotation, solve_body, SolveRows};
 use crate::frame::Event;
 use crate::grid::Grid;
 use crate::hash::StateHash;
@@ -657,6 +657,7 @@ impl CellModel for RigidBodyModel {
         }
         let mut candidates: Vec<Candidate<'_>> = Vec::new();
         let mut cache = Vec::new();
+        let mut rows = SolveRows::default();
         for own in nb.own() {
             if self.is_asleep(own)
                 && !nb
@@ -786,7 +787,14 @@ impl CellModel for RigidBodyModel {
                     left_out.push(set);
                 }
             }
-            let mut next = solve_body(&start, &found.sets, self.gravity, self.dt, &self.params);
+            let mut next = solve_body(
+                &start,
+                &found.sets,
+                self.gravity,
+                self.dt,
+                &self.params,
+                &mut rows,
+            );
             if !left_out.is_empty() {
                 // The start pose (the sets' points) with the end velocities.
                 let mut at_end = start.clone();
@@ -800,7 +808,14 @@ impl CellModel for RigidBodyModel {
                     }
                 }
                 if resolve {
-                    next = solve_body(&start, &found.sets, self.gravity, self.dt, &self.params);
+                    next = solve_body(
+                        &start,
+                        &found.sets,
+                        self.gravity,
+                        self.dt,
+                        &self.params,
+                        &mut rows,
+                    );
                 }
             }
             next.position += effect.dx;

@@ -217,6 +217,35 @@ fn apply_impulse(f: &Frame, v: &mut Vec3, w: &mut Vec3, r: &Vec3, imp: &Vec3) {
     *w += f.inv_inertia * r.cross(imp);
 }
 
+/// The per-point and per-set rows of one body's solve, kept between solves so a cell's
+/// bodies reuse one allocation (a solve starts them afresh: `reset`).
+#[derive(Default)]
+pub(crate) struct SolveRows {
+    scratch: Vec<PointScratch>,
+    offsets: Vec<Vec3>,
+    impact: Vec<ImpactRow>,
+    position: Vec<PositionRow>,
+    engaged_sets: Vec<bool>,
+    bounced_sets: Vec<bool>,
+}
+
+impl SolveRows {
+    /// Rows for `points` contact points in `sets` sets, every one at its default, as a
+    /// fresh allocation would hold them.
+    fn reset(&mut self, points: usize, sets: usize) {
+        fn fresh<T: Clone>(v: &mut Vec<T>, len: usize, value: T) {
+            v.clear();
+            v.resize(len, value);
+        }
+        fresh(&mut self.scratch, points, PointScratch::default());
+        fresh(&mut self.offsets, points, Vec3::zeros());
+        fresh(&mut self.impact, points, ImpactRow::default());
+        fresh(&mut self.position, points, PositionRow::default());
+        fresh(&mut self.engaged_sets, sets, false);
+        fresh(&mut self.bounced_sets, sets, false);
+    }
+}
+
 /// Advances `body` by one step of `dt` seconds against the contact sets (ascending partner
 /// id, static environment last). Returns the new state (velocities and pose).
 pub(crate) fn solve_body(
@@ -225,6 +254,7 @@ pub(crate) fn solve_body(
     gravity: Vec3,
     dt: f32,
     p: &SolverParams,
+    rows: &mut SolveRows,
 ) -> Body {
     let n_sub = p.substeps.max(1);
     let h = dt / n_sub as f32;
@@ -239,12 +269,15 @@ pub(crate) fn solve_body(
         return b;
     }
     let count: usize = sets.iter().map(|s| s.points.len()).sum();
-    let mut scratch = vec![PointScratch::default(); count];
-    let mut offsets = vec![Vec3::zeros(); count];
-    let mut impact = vec![ImpactRow::default(); count];
-    let mut position = vec![PositionRow::default(); count];
-    let mut engaged_sets = vec![false; sets.len()];
-    let mut bounced_sets = vec![false; sets.len()];
+    rows.reset(count, sets.len());
+    let SolveRows {
+        scratch,
+        offsets,
+        impact,
+        position,
+        engaged_sets,
+        bounced_sets,
+    } = rows;
     let rest_threshold = 2.0 * gravity.norm() * h;
     // Each pile point's mobility along its normal (the normals are fixed for the step); read
     // only at pile points, so left empty without a pile set.
