@@ -1,7 +1,9 @@
 //! Load balancing off against on, side by side in one run: the built-in `skewed` scene
 //! (`BAL_OBJECTS` cubes, default 2000, all in one corner) for `BAL_STEPS` steps (default
 //! 200) with `BAL_WORLDS` worlds (default 8) on `BAL_THREADS` threads (default 2), `cell`
-//! mode, window 16, blocks partition. Runs off and on alternately `BAL_REPEATS` times
+//! mode, window 16, partition `BAL_PARTITION` (default `equal-blocks`: equal territories, so
+//! the skewed load starts unbalanced; `blocks` cuts where the bodies balance and leaves
+//! balancing little to do). Runs off and on alternately `BAL_REPEATS` times
 //! (default 3), with the threaded laggard lead `BAL_LEAD` (default 0), thresholds
 //! `BAL_THRESHOLDS=U,H,O` (default 0.8,1.05,1.5), backoff `BAL_BACKOFF=on|off` (default on)
 //! and ghost policy `BAL_GHOSTS`
@@ -33,7 +35,7 @@ mod knobs;
 use knobs::{env, median, median_ratio};
 use soda::exec::sync::StdFacade;
 use soda::exec::threaded::{run_threaded_with, ThreadedOptions, ThreadedReport, ThreadedSetup};
-use soda::kernel::{BalanceConfig, GhostPolicy, KernelConfig, RollbackMode};
+use soda::kernel::{BalanceConfig, GhostPolicy, KernelConfig, PartitionKind, RollbackMode};
 use soda::scene::builtin::builtin;
 use std::io::Write;
 
@@ -49,6 +51,11 @@ fn main() {
         Ok("full") => GhostPolicy::Full,
         _ => GhostPolicy::Delta,
     };
+    let partition: PartitionKind = std::env::var("BAL_PARTITION")
+        .as_deref()
+        .unwrap_or("equal-blocks")
+        .parse()
+        .expect("BAL_PARTITION");
     let scene = builtin("skewed", Some(objects), 0).expect("built-in scene");
     let mut on = BalanceConfig {
         period,
@@ -88,6 +95,7 @@ fn main() {
             .mode(RollbackMode::Cell)
             .window(16)
             .ghosts(ghosts)
+            .partition(partition.clone())
             .balance(balance.clone());
         run_threaded_with::<_, StdFacade>(
             ThreadedSetup::new(scene.model(), scene.grid(), scene.initial_bodies()),
@@ -98,7 +106,7 @@ fn main() {
     };
     println!(
         "skewed, {objects} cubes, {steps} steps, {worlds} worlds on {threads} threads, \
-         balancing period {period}"
+         partition {partition}, balancing period {period}"
     );
     println!(
         "run  balance  wall s  imbalance  rounds  cells moved  famines  busy s  idle s  gvt s  \

@@ -149,11 +149,10 @@ fn unchanged_cells_share_their_logged_states() {
     let (mut reference, _) = ReferenceRun::new(scene.model(), scene.grid(), scene.initial_bodies());
     // Two worlds of equal numbers of cells, under which schedule 5 leaves a world far enough
     // ahead that the logs hold most of the window (checked below).
-    let equal_cells = soda::kernel::partition::Partition::blocks(&scene.grid(), 2);
     let cfg = KernelConfig::new(2)
         .mode(RollbackMode::Cell)
         .window(64)
-        .partition(PartitionKind::Explicit(equal_cells.owners().to_vec()));
+        .partition(PartitionKind::EqualBlocks);
     let options = soda::exec::virtual_exec::VirtualOptions::new(
         soda::exec::virtual_exec::ScheduleSpec::Seeded(5),
     );

@@ -133,9 +133,8 @@ fn a_world_whose_bodies_all_leave_fights_famine_and_gets_work_again() {
     let expected = reference(&m, &g, &b, steps);
     // Four equal slabs along x (not cut by the bodies, which all start in the first), so
     // the particles march out of world 0's territory and leave it without work.
-    let slabs = soda::kernel::Partition::blocks(&g, 4);
     let config = KernelConfig::new(4)
-        .partition(PartitionKind::Explicit(slabs.owners().to_vec()))
+        .partition(PartitionKind::EqualBlocks)
         .balance(proxy_balance(5));
     let (mut run, _) = VirtualRun::new(m, g, b, &config, &VirtualOptions::seeded(3));
     let frames = run.run(steps);

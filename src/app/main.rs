@@ -72,7 +72,7 @@ pub struct KernelArgs {
     /// by its rollbacks [default: 16].
     #[arg(long, value_name = "W")]
     pub window: Option<crate::kernel::WindowSpec>,
-    /// Partitioner: blocks, kmeans or random [default: blocks].
+    /// Partitioner: blocks, equal-blocks, kmeans or random [default: blocks].
     #[arg(long, value_name = "P")]
     pub partition: Option<String>,
 }
@@ -81,9 +81,9 @@ impl KernelArgs {
     fn config(&self) -> Result<KernelConfig> {
         let partition: PartitionKind = match &self.partition {
             None => PartitionKind::Blocks,
-            Some(p) => p
-                .parse()
-                .map_err(|_| anyhow!("--partition {p}: use blocks, kmeans or random"))?,
+            Some(p) => p.parse().map_err(|_| {
+                anyhow!("--partition {p}: use blocks, equal-blocks, kmeans or random")
+            })?,
         };
         let window = self.window.unwrap_or(crate::kernel::WindowSpec::Fixed(16));
         Ok(window

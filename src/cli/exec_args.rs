@@ -68,6 +68,9 @@ impl From<GhostsArg> for GhostPolicy {
 pub enum PartitionArg {
     /// Axis-aligned boxes, cut where the bodies balance (recursive bisection).
     Blocks,
+    /// Axis-aligned boxes of equal numbers of cells, whatever the bodies (classic static
+    /// territories).
+    EqualBlocks,
     /// The thesis's equal-size k-means over body positions (seeded).
     Kmeans,
     /// Every cell to a random world, the most fragmented territories (seeded).
@@ -78,6 +81,7 @@ impl From<PartitionArg> for PartitionKind {
     fn from(p: PartitionArg) -> Self {
         match p {
             PartitionArg::Blocks => PartitionKind::Blocks,
+            PartitionArg::EqualBlocks => PartitionKind::EqualBlocks,
             PartitionArg::Kmeans => PartitionKind::KMeans,
             PartitionArg::Random => PartitionKind::Random,
         }
@@ -263,10 +267,16 @@ impl ExecutorArgs {
             );
         }
         let partition = self.partition.map_or(PartitionKind::Blocks, Into::into);
-        if self.partition_seed.is_some() && partition == PartitionKind::Blocks {
+        if self.partition_seed.is_some()
+            && matches!(
+                partition,
+                PartitionKind::Blocks | PartitionKind::EqualBlocks
+            )
+        {
             bail!(
-                "--partition-seed seeds the kmeans and random partitioners, and blocks has \
-                 nothing random: add `--partition kmeans` or `--partition random`, or drop it"
+                "--partition-seed seeds the kmeans and random partitioners, and {} has \
+                 nothing random: add `--partition kmeans` or `--partition random`, or drop it",
+                partition.name()
             );
         }
         let schedule = match (&self.schedule, self.schedule_seed) {

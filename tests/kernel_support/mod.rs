@@ -114,6 +114,7 @@ pub fn mode() -> impl Strategy<Value = RollbackMode> {
 pub fn partition() -> impl Strategy<Value = PartitionKind> {
     prop_oneof![
         Just(PartitionKind::Blocks),
+        Just(PartitionKind::EqualBlocks),
         Just(PartitionKind::KMeans),
         Just(PartitionKind::Random)
     ]

@@ -53,6 +53,9 @@ pub enum PartitionKind {
     /// positions balance (SPEC.md §K2).
     #[default]
     Blocks,
+    /// Axis-aligned boxes of equal numbers of cells, whatever the bodies (the classic static
+    /// territories: a skewed scene starts unbalanced, as load-balancing studies want).
+    EqualBlocks,
     /// The thesis's setup (§3.2.4): equal-size k-means over body positions (seeded by
     /// `KernelConfig::partition_seed`), each cell to the world with most bodies in it, empty
     /// cells to the nearest centroid.

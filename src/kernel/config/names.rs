@@ -44,11 +44,12 @@ impl FromStr for RollbackMode {
 }
 
 impl PartitionKind {
-    /// Its name: `blocks`, `kmeans`, `random`, or `explicit` for an explicit owner list
-    /// (which [`FromStr`] does not read).
+    /// Its name: `blocks`, `equal-blocks`, `kmeans`, `random`, or `explicit` for an
+    /// explicit owner list (which [`FromStr`] does not read).
     pub fn name(&self) -> &'static str {
         match self {
             Self::Blocks => "blocks",
+            Self::EqualBlocks => "equal-blocks",
             Self::KMeans => "kmeans",
             Self::Random => "random",
             Self::Explicit(_) => "explicit",
@@ -62,9 +63,9 @@ impl fmt::Display for PartitionKind {
     }
 }
 
-/// A partitioner name that is none of `blocks`, `kmeans`, `random`.
+/// A partitioner name that is none of `blocks`, `equal-blocks`, `kmeans`, `random`.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("`{0}` is not a partitioner: use blocks, kmeans or random")]
+#[error("`{0}` is not a partitioner: use blocks, equal-blocks, kmeans or random")]
 pub struct UnknownPartition(pub String);
 
 impl FromStr for PartitionKind {
@@ -73,6 +74,7 @@ impl FromStr for PartitionKind {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "blocks" => Ok(Self::Blocks),
+            "equal-blocks" => Ok(Self::EqualBlocks),
             "kmeans" => Ok(Self::KMeans),
             "random" => Ok(Self::Random),
             other => Err(UnknownPartition(other.to_string())),
@@ -124,6 +126,7 @@ mod tests {
         }
         for p in [
             PartitionKind::Blocks,
+            PartitionKind::EqualBlocks,
             PartitionKind::KMeans,
             PartitionKind::Random,
         ] {

@@ -57,6 +57,7 @@ impl Partition {
     ) -> Partition {
         match kind {
             PartitionKind::Blocks => Self::blocks_by_bodies(grid, worlds, positions),
+            PartitionKind::EqualBlocks => Self::blocks(grid, worlds),
             PartitionKind::KMeans => Self::kmeans(grid, worlds, positions, seed),
             PartitionKind::Random => Self::random(grid, worlds, seed),
             PartitionKind::Explicit(o) => Self::from_owners(grid, worlds, o.clone()),
