@@ -432,6 +432,27 @@ fn partition_seed_without_a_seeded_partitioner_is_refused() {
     );
     let err = fails(&["verify", "--steps", "1", "--partition-seed", "3"]);
     assert!(err.contains("--partition-seed"), "{err}");
+    // Equal blocks have nothing to seed either, on both commands.
+    for command in [&["run", "--executor", "virtual"][..], &["verify"]] {
+        let err = fails(
+            &[
+                command,
+                &[
+                    "--steps",
+                    "1",
+                    "--partition",
+                    "equal-blocks",
+                    "--partition-seed",
+                    "3",
+                ],
+            ]
+            .concat(),
+        );
+        assert!(
+            err.contains("--partition-seed") && err.contains("equal-blocks has nothing random"),
+            "{command:?}: {err}"
+        );
+    }
 }
 
 #[test]

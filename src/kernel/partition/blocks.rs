@@ -49,10 +49,31 @@ fn prime_factors_largest_first(mut n: usize) -> Vec<usize> {
 }
 
 impl Partition {
-    /// Axis-aligned blocks of equal numbers of cells: [`Partition::blocks_by_bodies`] with
-    /// no bodies.
+    /// Axis-aligned blocks of equal numbers of cells, whatever the bodies (`equal-blocks`,
+    /// the partitioner `blocks` was before it followed the bodies): the prime factors of
+    /// `worlds`, largest first, are given one by one to the axis with the most cells per
+    /// block (the lowest axis on ties); cell `x` of an axis of `n` cells split in `f` goes
+    /// to block `⌊x·f/n⌋`, and block `(bx, by, bz)` is world `bx + fx·(by + fy·bz)`.
     pub fn blocks(grid: &Grid, worlds: usize) -> Partition {
-        Self::blocks_by_bodies(grid, worlds, &[])
+        let mut f = [1usize; 3];
+        for p in prime_factors_largest_first(worlds.max(1)) {
+            let axis = (0..3)
+                .max_by(|&a, &b| {
+                    let ra = grid.dims[a] as f64 / f[a] as f64;
+                    let rb = grid.dims[b] as f64 / f[b] as f64;
+                    ra.total_cmp(&rb).then(b.cmp(&a))
+                })
+                .unwrap_or(0);
+            f[axis] *= p;
+        }
+        let owner = (0..grid.cell_count())
+            .map(|i| {
+                let c = grid.coord(i);
+                let b = |v: i32, a: usize| (v as usize * f[a]) / grid.dims[a] as usize;
+                (b(c.x, 0) + f[0] * (b(c.y, 1) + f[1] * b(c.z, 2))) as WorldId
+            })
+            .collect();
+        Self::from_owners(grid, worlds.max(1), owner)
     }
 
     /// Axis-aligned blocks by recursive bisection: the prime factors of `worlds`, largest
@@ -60,10 +81,10 @@ impl Partition {
     /// axis (the lowest axis on ties) into `p` slabs of whole cell layers, each cut placed
     /// where the bodies before it come closest to their share (the earliest such layer on
     /// ties), every slab at least one layer thick. A box holding no body, or with fewer
-    /// layers than `p`, is cut into equal numbers of layers (layer `x` of `n` to slab
-    /// `⌊x·p/n⌋`). Slab `i` of a box holding worlds `w0..w0 + n` gets worlds
-    /// `w0 + i·n/p ..`: neighbouring territories have nearby ids. `positions` outside the
-    /// grid are not counted.
+    /// layers than `p`, is cut into equal numbers of layers (layer `x` of `L` to slab
+    /// `⌊x·p/L⌋`). Slab `i` of a box holding worlds `w0..w0 + m` gets worlds
+    /// `w0 + i·m/p ..`: neighbouring territories have nearby ids. `positions` outside the
+    /// grid are not counted (nor simulated).
     pub fn blocks_by_bodies(grid: &Grid, worlds: usize, positions: &[[f32; 3]]) -> Partition {
         let worlds = worlds.max(1);
         let dims = grid.dims.map(|d| d as usize);
@@ -175,6 +196,18 @@ mod tests {
     }
 
     #[test]
+    fn equal_blocks_number_worlds_x_fastest() {
+        // 8 × 4 × 6 cells, 4 worlds: x split in two, then z in two; x varies fastest.
+        let g = grid();
+        let p = Partition::blocks(&g, 4);
+        let at = |x, y, z| p.owner_of(&g, crate::grid::CellCoord::new(x, y, z));
+        assert_eq!(
+            [at(0, 0, 0), at(7, 0, 0), at(0, 3, 5), at(7, 3, 5)],
+            [0, 1, 2, 3]
+        );
+    }
+
+    #[test]
     fn blocks_without_bodies_cut_equal_layers() {
         assert_eq!(slab_bounds(&[0; 21], 2), vec![0, 11, 21]);
         assert_eq!(slab_bounds(&[0; 21], 4), vec![0, 6, 11, 16, 21]);
@@ -231,6 +264,8 @@ mod tests {
             let pts: Vec<[f32; 3]> = pts.into_iter().map(|(x, y, z)| [x, y, z]).collect();
             let p = Partition::blocks_by_bodies(&g, worlds, &pts);
             prop_assert_eq!(p.worlds(), worlds);
+            let cells: usize = (0..worlds as WorldId).map(|w| p.cells_of(w).len()).sum();
+            prop_assert_eq!(cells, g.cell_count());
             // Each non-empty territory is exactly the box spanned by its cells.
             for w in 0..worlds as WorldId {
                 let cells = p.cells_of(w);

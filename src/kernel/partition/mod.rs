@@ -1,8 +1,9 @@
 //! Territories: a map from every cell of the grid to the world that owns it.
 //!
-//! Partitioners: axis-aligned blocks balanced by bodies (blocks.rs), the thesis's equal-size k-means (§3.2.4), uniformly
-//! random cells (fragmented territories, for tests) and explicit maps. All are deterministic
-//! for their inputs and seed. A world may own no cell at all.
+//! Partitioners: axis-aligned blocks cut where the bodies balance or of equal cells
+//! (blocks.rs), the thesis's equal-size k-means (§3.2.4), uniformly random cells
+//! (fragmented territories, for tests) and explicit maps. All are deterministic for their
+//! inputs and seed. A world may own no cell at all.
 
 use super::config::PartitionKind;
 use crate::grid::{CellCoord, Grid};
