@@ -445,3 +445,42 @@ fn interrupted_model_run_says_where_it_stopped_and_resumes_to_the_same_hash() {
     let resumed = ok(&["resume", s(&file)]);
     assert_eq!(hash_of(&resumed), whole);
 }
+
+#[test]
+fn resumed_territory_map_starts_at_the_checkpoint_step() {
+    // A resumed run partitions the checkpoint's bodies: its first map is of that step.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("skewed.ckpt");
+    let maps = dir.path().join("maps");
+    let first = ok(&[
+        "run",
+        "--scene",
+        "skewed",
+        "--objects",
+        "64",
+        "--steps",
+        "20",
+        "--executor",
+        "virtual",
+        "--worlds",
+        "4",
+        "--checkpoint",
+        s(&file),
+    ]);
+    assert!(first.contains("at step 20"), "{first}");
+    ok(&[
+        "resume",
+        s(&file),
+        "--steps",
+        "30",
+        "--territories",
+        s(&maps),
+    ]);
+    let svg = std::fs::read_to_string(maps.join("territory-000020.svg"))
+        .expect("the map of the checkpoint's step");
+    assert!(svg.contains("<svg"));
+    assert!(
+        !maps.join("territory-000000.svg").exists(),
+        "no map of a step the resumed run did not start from"
+    );
+}

@@ -380,6 +380,17 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         }
     };
     initial.sort_by_key(|b| b.id());
+    // What --territories draws the initial partition from: the bodies the run starts with.
+    let start = RunStart {
+        step: first_step,
+        positions: match &output.territories {
+            Some(_) => initial
+                .iter()
+                .map(<RigidBodyModel as soda::CellModel>::position)
+                .collect(),
+            None => Vec::new(),
+        },
+    };
     let initial_bodies = match &from {
         Some(f) => f.bodies.len(),
         None => scene.bodies.len(),
@@ -529,7 +540,7 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         }
     }
     if let Some(dir) = &territories {
-        if let Err(e) = write_territories(dir, &scene, &options, &report) {
+        if let Err(e) = write_territories(dir, &scene, &start, &options, &report) {
             failures.push(e.context("--territories: the maps were not all written"));
         }
     }
@@ -639,11 +650,19 @@ fn interrupted(
     std::process::exit(i32::from(interrupt::exit_status()))
 }
 
-/// Writes the territory map of the initial partition and after every balancing round, and
-/// the imbalance per round, into `dir`.
+/// Where a run started: its first step and its bodies' positions then (the scene's, or a
+/// resumed run's checkpoint's), which its initial partition was built from.
+struct RunStart {
+    step: u64,
+    positions: Vec<[f32; 3]>,
+}
+
+/// Writes the territory map of the initial partition (at the run's first step) and after
+/// every balancing round, and the imbalance per round, into `dir`.
 fn write_territories(
     dir: &std::path::Path,
     scene: &soda::Scene,
+    start: &RunStart,
     options: &soda::sim::RunOptions,
     report: &RunReport,
 ) -> Result<()> {
@@ -652,19 +671,14 @@ fn write_territories(
         return Ok(());
     };
     let grid = scene.grid();
-    let positions: Vec<[f32; 3]> = scene
-        .initial_bodies()
-        .iter()
-        .map(<RigidBodyModel as soda::CellModel>::position)
-        .collect();
     let initial = Partition::build(
         &options.kernel.partition,
         &grid,
         k.worlds,
-        &positions,
+        &start.positions,
         options.kernel.partition_seed,
     );
-    let maps = std::iter::once((0, initial.owners().to_vec()))
+    let maps = std::iter::once((start.step, initial.owners().to_vec()))
         .chain(k.balance_rounds.iter().map(|r| (r.step, r.owners.clone())));
     let mut written = 0;
     for (step, owners) in maps {
