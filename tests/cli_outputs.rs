@@ -620,3 +620,39 @@ fn a_checkpoint_of_a_run_without_steps_is_refused_before_the_run() {
     );
     assert!(!ckpt.exists());
 }
+
+#[test]
+fn more_worlds_than_cells_is_run_with_a_warning_naming_the_grid() {
+    // falling-cubes with 27 cubes has a 9 x 4 x 9 grid: 324 cells.
+    let out = soda(&[
+        "run",
+        "--objects",
+        "27",
+        "--steps",
+        "2",
+        "--executor",
+        "virtual",
+        "--worlds",
+        "500",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("500 worlds on a grid of 324 cells")
+            && err.contains("176 of them own no cell")
+            && err.contains("--worlds 324 or fewer"),
+        "{err}"
+    );
+    let out = soda(&[
+        "run",
+        "--objects",
+        "27",
+        "--steps",
+        "2",
+        "--executor",
+        "virtual",
+        "--worlds",
+        "8",
+    ]);
+    assert!(!stderr(&out).contains("own no cell"), "{}", stderr(&out));
+}
