@@ -270,12 +270,7 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                 threads: threads(a.threads),
                 ..RunOptions::default()
             };
-            if a.steps == 0 && a.checkpoint.is_some() {
-                bail!(
-                    "--checkpoint: the run computes no step (--steps 0), so no checkpoint would \
-                     be written: give --steps 1 or more"
-                );
-            }
+            check_checkpoint_has_a_step(a.steps, a.checkpoint.is_some(), false)?;
             let checkpoint = match &a.checkpoint {
                 Some(path) => Some(super::checkpoint::CheckpointPlan::checked(
                     path,
@@ -412,6 +407,35 @@ pub fn check_executor_options(
         bail!(
             "--threads applies to the threaded and MPI executors only: add `--executor \
              threaded` (or, under mpirun, `--executor mpi`)"
+        );
+    }
+    Ok(())
+}
+
+/// Refuses `--partition-seed` (`seed_given`) with a partitioner that has nothing random.
+pub fn check_partition_seed(partition: &PartitionKind, seed_given: bool) -> Result<()> {
+    if seed_given && !partition.is_seeded() {
+        bail!(
+            "--partition-seed seeds the kmeans and random partitioners, and {} has nothing \
+             random: add `--partition kmeans` or `--partition random`, or drop it",
+            partition.name()
+        );
+    }
+    Ok(())
+}
+
+/// Refuses `--checkpoint` (`checkpoint_given`) on a fresh run (`resumed` false) whose last
+/// step is 0: it computes no step, so no checkpoint would be written. A resumed run at its
+/// last step already has its checkpoint: the file it resumed from.
+pub fn check_checkpoint_has_a_step(
+    last_step: u64,
+    checkpoint_given: bool,
+    resumed: bool,
+) -> Result<()> {
+    if last_step == 0 && checkpoint_given && !resumed {
+        bail!(
+            "--checkpoint: the run computes no step (--steps 0), so no checkpoint would be \
+             written: give --steps 1 or more"
         );
     }
     Ok(())

@@ -27,5 +27,8 @@ mod main;
 pub mod output;
 mod registry;
 
-pub use main::{check_executor_options, main_with, run_with, ModelCli};
+pub use main::{
+    check_checkpoint_has_a_step, check_executor_options, check_partition_seed, main_with, run_with,
+    ModelCli,
+};
 pub use registry::{ModelSize, RegisteredModel, Registry};

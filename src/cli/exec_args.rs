@@ -267,18 +267,7 @@ impl ExecutorArgs {
             );
         }
         let partition = self.partition.map_or(PartitionKind::Blocks, Into::into);
-        if self.partition_seed.is_some()
-            && matches!(
-                partition,
-                PartitionKind::Blocks | PartitionKind::EqualBlocks
-            )
-        {
-            bail!(
-                "--partition-seed seeds the kmeans and random partitioners, and {} has \
-                 nothing random: add `--partition kmeans` or `--partition random`, or drop it",
-                partition.name()
-            );
-        }
+        soda::app::check_partition_seed(&partition, self.partition_seed.is_some())?;
         let schedule = match (&self.schedule, self.schedule_seed) {
             (Some(s), _) => parse_schedule(s).map_err(|e| {
                 anyhow::anyhow!("--schedule `{}` is not a schedule string: {e}", short(s))

@@ -311,14 +311,8 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
              has none; add --executor virtual or --executor threaded"
         );
     }
-    // A fresh run asked for a checkpoint must compute a step to write one (checked on every MPI rank alike) (a resumed run at
-    // its last step already has its checkpoint: the file it resumed from).
-    if last_step == 0 && checkpoint.is_some() && from.is_none() {
-        bail!(
-            "--checkpoint: the run computes no step (--steps 0), so no checkpoint would be \
-             written: give --steps 1 or more"
-        );
-    }
+    // Before the MPI role split: every rank refuses alike.
+    soda::app::check_checkpoint_has_a_step(last_step, checkpoint.is_some(), from.is_some())?;
     // Under MPI every rank runs this; only rank 0 writes outputs and prints.
     let role = super::mpi::Role::of(&options)?;
     let quiet_outputs;

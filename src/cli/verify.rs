@@ -139,18 +139,10 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     // Under mpirun: MPI starts before anything is printed, and only rank 0 prints.
     let role = super::mpi::Role::under_mpi(args.mpi_repeats > 0)?;
     let root = role.root();
-    if args.partition_seed.is_some()
-        && matches!(
-            args.partition,
-            PartitionArg::Blocks | PartitionArg::EqualBlocks
-        )
-    {
-        bail!(
-            "--partition-seed seeds the kmeans and random partitioners, and {} has \
-             nothing random: add `--partition kmeans` or `--partition random`, or drop it",
-            PartitionKind::from(args.partition).name()
-        );
-    }
+    soda::app::check_partition_seed(
+        &PartitionKind::from(args.partition),
+        args.partition_seed.is_some(),
+    )?;
     let threads = args.threads.map_or_else(default_threads, |t| t as usize);
     let mut kernel = args
         .window

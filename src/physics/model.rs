@@ -787,14 +787,10 @@ impl CellModel for RigidBodyModel {
                     left_out.push(set);
                 }
             }
-            let mut next = solve_body(
-                &start,
-                &found.sets,
-                self.gravity,
-                self.dt,
-                &self.params,
-                &mut rows,
-            );
+            let solve = |sets: &[ContactSet], rows: &mut SolveRows| {
+                solve_body(&start, sets, self.gravity, self.dt, &self.params, rows)
+            };
+            let mut next = solve(&found.sets, &mut rows);
             if !left_out.is_empty() {
                 // The start pose (the sets' points) with the end velocities.
                 let mut at_end = start.clone();
@@ -808,14 +804,7 @@ impl CellModel for RigidBodyModel {
                     }
                 }
                 if resolve {
-                    next = solve_body(
-                        &start,
-                        &found.sets,
-                        self.gravity,
-                        self.dt,
-                        &self.params,
-                        &mut rows,
-                    );
+                    next = solve(&found.sets, &mut rows);
                 }
             }
             next.position += effect.dx;

@@ -13,6 +13,10 @@ use crate::physics::Body;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
+/// How far over a cap a push's speed change may be and still count as the cap: a relative
+/// ulp or so (an impulse built in f32 for exactly the cap, as the viewer's pushes are).
+const PUSH_CAP_SLACK: f64 = 1.0 + 1e-5;
+
 /// What an input does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -284,9 +288,7 @@ impl InputScript {
                             if let Some(spec) = specs.get(&id) {
                                 let b = spec.to_body();
                                 let dv = length(impulse) * f64::from(b.inv_mass());
-                                // A relative ulp or so over (an impulse built in f32 for
-                                // exactly the cap, as the viewer's pushes are) is the cap.
-                                if dv > f64::from(scene.solver.max_speed) * (1.0 + 1e-5) {
+                                if dv > f64::from(scene.solver.max_speed) * PUSH_CAP_SLACK {
                                     return Err(fail(
                                         i,
                                         "impulse",
@@ -300,7 +302,7 @@ impl InputScript {
                                 }
                                 let most = b.inv_inertia().max();
                                 let dw = length(angular) * f64::from(most);
-                                if dw > f64::from(scene.solver.max_angular_speed) * (1.0 + 1e-5) {
+                                if dw > f64::from(scene.solver.max_angular_speed) * PUSH_CAP_SLACK {
                                     return Err(fail(
                                         i,
                                         "angular_impulse",

@@ -44,6 +44,12 @@ impl FromStr for RollbackMode {
 }
 
 impl PartitionKind {
+    /// Whether `KernelConfig::partition_seed` changes its territories (k-means and random;
+    /// both kinds of blocks and an explicit map have nothing random).
+    pub fn is_seeded(&self) -> bool {
+        matches!(self, Self::KMeans | Self::Random)
+    }
+
     /// Its name: `blocks`, `equal-blocks`, `kmeans`, `random`, or `explicit` for an
     /// explicit owner list (which [`FromStr`] does not read).
     pub fn name(&self) -> &'static str {

@@ -176,12 +176,33 @@ fn slab_bounds(per_layer: &[u64], p: usize) -> Vec<usize> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::grid;
     use super::*;
-    use crate::math::Vec3;
     use proptest::prelude::*;
 
-    fn grid() -> Grid {
-        Grid::covering(Vec3::zeros(), Vec3::new(8.0, 4.0, 6.0), 1.0)
+    /// How many of `pts` (all inside the grid) lie in world `w`'s territory.
+    fn bodies_of(g: &Grid, part: &Partition, pts: &[[f32; 3]], w: WorldId) -> usize {
+        pts.iter()
+            .filter(|q| g.cell_of(**q).is_some_and(|c| part.owner_of(g, c) == w))
+            .count()
+    }
+
+    /// The smallest box of cells holding all of `cells` (linear indices), as its volume.
+    fn box_volume(g: &Grid, cells: &[u32]) -> usize {
+        let coords: Vec<[i32; 3]> = cells
+            .iter()
+            .map(|&c| {
+                let c = g.coord(c as usize);
+                [c.x, c.y, c.z]
+            })
+            .collect();
+        (0..3)
+            .map(|a| {
+                let lo = coords.iter().map(|c| c[a]).min().unwrap_or(0);
+                let hi = coords.iter().map(|c| c[a]).max().unwrap_or(-1);
+                (hi - lo + 1) as usize
+            })
+            .product()
     }
 
     #[test]
@@ -240,18 +261,17 @@ mod tests {
             pts.push([2.5 + (i % 6) as f32, 0.5, 0.5]);
         }
         let p = Partition::blocks_by_bodies(&g, 2, &pts);
-        let count = |w: WorldId| {
-            pts.iter()
-                .filter(|q| p.owner_of(&g, g.cell_of(**q).unwrap()) == w)
-                .count()
-        };
-        assert_eq!((count(0), count(1)), (30, 50), "cut after x column 0");
+        assert_eq!(
+            (bodies_of(&g, &p, &pts, 0), bodies_of(&g, &p, &pts, 1)),
+            (30, 50),
+            "cut after x column 0"
+        );
         let equal = Partition::blocks(&g, 2);
-        let in_equal = pts
-            .iter()
-            .filter(|q| equal.owner_of(&g, g.cell_of(**q).unwrap()) == 0)
-            .count();
-        assert_eq!(in_equal, 68, "equal cells: 4 of 8 columns");
+        assert_eq!(
+            bodies_of(&g, &equal, &pts, 0),
+            68,
+            "equal cells: 4 of 8 columns"
+        );
     }
 
     proptest! {
@@ -270,18 +290,12 @@ mod tests {
             for w in 0..worlds as WorldId {
                 let cells = p.cells_of(w);
                 if cells.is_empty() { continue; }
-                let coords: Vec<_> = cells.iter().map(|&c| g.coord(c as usize)).collect();
-                let lo = [coords.iter().map(|c| c.x).min().unwrap(), coords.iter().map(|c| c.y).min().unwrap(), coords.iter().map(|c| c.z).min().unwrap()];
-                let hi = [coords.iter().map(|c| c.x).max().unwrap(), coords.iter().map(|c| c.y).max().unwrap(), coords.iter().map(|c| c.z).max().unwrap()];
-                let volume = ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1)) as usize;
-                prop_assert_eq!(volume, cells.len(), "world {} is not a box", w);
+                prop_assert_eq!(box_volume(&g, cells), cells.len(), "world {} is not a box", w);
             }
             // Two worlds: the cut is the best single cut along the split axis.
             if worlds == 2 && !pts.is_empty() {
-                let count = |part: &Partition, w: WorldId| pts.iter().filter(|q| part.owner_of(&g, g.cell_of(**q).unwrap()) == w).count() as i64;
-                let gap = (count(&p, 0) - count(&p, 1)).abs();
-                let equal = Partition::blocks(&g, 2);
-                prop_assert!(gap <= (count(&equal, 0) - count(&equal, 1)).abs());
+                let gap = |part: &Partition| bodies_of(&g, part, &pts, 0).abs_diff(bodies_of(&g, part, &pts, 1));
+                prop_assert!(gap(&p) <= gap(&Partition::blocks(&g, 2)));
             }
             prop_assert_eq!(p.clone(), Partition::blocks_by_bodies(&g, worlds, &pts));
         }

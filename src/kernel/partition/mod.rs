@@ -201,7 +201,8 @@ mod tests {
     use super::*;
     use crate::math::Vec3;
 
-    fn grid() -> Grid {
+    /// 8 × 4 × 6 cells of 1 m (also the blocks tests' grid).
+    pub(super) fn grid() -> Grid {
         Grid::covering(Vec3::zeros(), Vec3::new(8.0, 4.0, 6.0), 1.0)
     }
 
