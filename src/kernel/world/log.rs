@@ -20,6 +20,7 @@ use std::sync::Arc;
 pub(super) type Shared<S> = Option<SharedStates<S>>;
 
 /// The states of `s` as a slice.
+#[inline]
 pub(super) fn view<S>(s: &Shared<S>) -> &[S] {
     s.as_deref().unwrap_or(&[])
 }
@@ -75,8 +76,14 @@ impl<S, E> Out<S, E> {
     }
 
     /// The output of empty cell `cell`: nothing, not computed.
+    #[inline]
     pub(super) fn empty(cell: u32) -> Self {
-        Out::new(cell, None, Vec::new(), Vec::new(), false)
+        Out {
+            cell,
+            computed: false,
+            bodies: None,
+            rare: None,
+        }
     }
 
     /// The home cell (global) of each of `bodies`; empty exactly when every body stays in
@@ -273,17 +280,20 @@ impl<S> InputEntry<S> {
 
 impl<S: Clone, E: Clone> Slot<S, E> {
     /// The state of own cell `x`.
+    #[inline]
     pub(super) fn state(&self, x: OwnCell) -> &[S] {
         view(&self.states[x])
     }
 
     /// The view of margin cell `m` (empty if none).
+    #[inline]
     pub(super) fn ghost(&self, m: MarginCell) -> &[S] {
         view(&self.ghosts[m])
     }
 
     /// The states it holds for neighbour `n`: an own cell's state, a margin cell's view,
     /// nothing outside the grid.
+    #[inline(always)]
     pub(super) fn neighbour(&self, n: Nb) -> &[S] {
         match n {
             Nb::Outside => &[],

@@ -142,31 +142,42 @@ impl Prepared {
         }
     }
 
-    /// `nb` (the neighbourhood `nbrs` resolves at step `step`) with the hints of its
-    /// entities, if those of `step` are held.
+    /// Gives `nb` (the neighbourhood `nbrs` resolves at step `step`) the hints of its
+    /// entities, if those of `step` are held (in place: a neighbourhood is some 600 bytes).
     pub(super) fn attach<'a, S>(
         &'a self,
-        mut nb: Neighbourhood<'a, S>,
+        nb: &mut Neighbourhood<'a, S>,
         nbrs: &[Nb; 27],
         step: Step,
-    ) -> Neighbourhood<'a, S> {
+    ) {
         if self.step != Some(step) || self.hints.is_empty() {
-            return nb;
+            return;
         }
-        for r in 0..9 {
-            let mut span: Option<(usize, usize)> = None;
-            for (k, &n) in nbrs.iter().enumerate().skip(3 * r).take(3) {
-                let Some(f) = self.facts(n) else {
-                    continue;
-                };
-                let (start, end) = (f.start as usize, f.start as usize + nb.cells[k].len());
-                debug_assert!(span.is_none_or(|(_, e)| e == start), "a row is contiguous");
-                span = Some(span.map_or((start, end), |(s, _)| (s, end)));
+        for (r, row) in nbrs.chunks_exact(3).enumerate() {
+            // A row's cells are consecutive in the global order, so are their hints: the
+            // row's first cell inside the grid starts them, the row's entities count them.
+            let len: usize = nb.cells[3 * r..3 * r + 3].iter().map(|c| c.len()).sum();
+            if len == 0 {
+                continue;
             }
-            if let Some((s, e)) = span {
-                nb.hints[r] = &self.hints[s..e];
-            }
+            let Some(first) = row.iter().find_map(|&n| self.facts(n)) else {
+                continue;
+            };
+            debug_assert!(
+                {
+                    let mut end = first.start as usize;
+                    row.iter().zip(&nb.cells[3 * r..3 * r + 3]).all(|(&n, c)| {
+                        self.facts(n).is_none_or(|f| {
+                            let contiguous = f.start as usize == end;
+                            end += c.len();
+                            contiguous
+                        })
+                    })
+                },
+                "a row is contiguous"
+            );
+            let start = first.start as usize;
+            nb.hints[r] = &self.hints[start..start + len];
         }
-        nb
     }
 }

@@ -59,7 +59,8 @@ impl<M: CellModel> World<M> {
         let c = grid.coord(cell as usize);
         let nbrs = &self.nbrs[x];
         let cells: [&[M::State]; 27] = std::array::from_fn(|k| slot.neighbour(nbrs[k]));
-        let nb = self.prepared.attach(Neighbourhood::new(c, cells), nbrs, s);
+        let mut nb = Neighbourhood::new(c, cells);
+        self.prepared.attach(&mut nb, nbrs, s);
         let mut events = Vec::new();
         self.scratch.clear();
         self.model
@@ -404,9 +405,14 @@ impl<M: CellModel> World<M> {
         // The outputs, written into the slot at once (no copy-on-write per cell).
         let mut outs = Vec::with_capacity(n);
         for x in OwnCell::all(n) {
-            let o = match self.take_ahead(x, h) {
-                Some(o) => o,
-                None => self.compute_or_keep(x, h),
+            // An empty cell was not computed ahead (nor is it computed now).
+            let o = if self.slots[i].state(x).is_empty() {
+                Out::empty(self.cells[x])
+            } else {
+                match self.take_ahead(x, h) {
+                    Some(o) => o,
+                    None => self.compute_or_keep(x, h),
+                }
             };
             if o.stays() {
                 landings[x] += u32::from(o.bodies.is_some());
