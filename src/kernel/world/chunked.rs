@@ -68,9 +68,16 @@ impl<K: Position, T: Clone + Default> Chunked<K, T> {
     }
 
     /// The entries of `values`, in position order (each chunk written once, owned alone).
-    pub(super) fn from_vec(values: Vec<T>) -> Self {
+    #[cfg(test)]
+    pub(super) fn from_vec(mut values: Vec<T>) -> Self {
+        Self::drain_from(&mut values)
+    }
+
+    /// The entries of `values`, in position order (each chunk written once, owned alone),
+    /// drained: `values` keeps its capacity for the next table (a world builds one per step).
+    pub(super) fn drain_from(values: &mut Vec<T>) -> Self {
         let len = values.len();
-        let mut it = values.into_iter();
+        let mut it = values.drain(..);
         let chunks = (0..len.div_ceil(CHUNK))
             .map(|_| Arc::new(std::array::from_fn(|_| it.next().unwrap_or_default())))
             .collect();

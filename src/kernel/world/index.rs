@@ -47,7 +47,7 @@ impl MarginCell {
 }
 
 /// One value per own cell, indexed by [`OwnCell`].
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub(super) struct PerOwnCell<T>(Vec<T>);
 
 impl<T> PerOwnCell<T> {
@@ -64,6 +64,15 @@ impl<T> PerOwnCell<T> {
     /// The values in own-cell order.
     pub(super) fn iter(&self) -> std::slice::Iter<'_, T> {
         self.0.iter()
+    }
+
+    /// Sets every value to `value`, for `len` own cells (keeping the allocation).
+    pub(super) fn reset(&mut self, len: usize, value: T)
+    where
+        T: Clone,
+    {
+        self.0.clear();
+        self.0.resize(len, value);
     }
 
     /// Each own cell with its value, in own-cell order.

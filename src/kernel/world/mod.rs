@@ -60,6 +60,26 @@ pub enum ActionKind {
     Compute,
 }
 
+/// The per-own-cell buffers `advance` fills each step, kept between steps.
+struct AdvanceScratch<S, E> {
+    /// How many own cells' outputs land in each own cell.
+    landings: PerOwnCell<u32>,
+    /// The outputs, before they become the slot's table.
+    outs: Vec<Option<log::Out<S, E>>>,
+    /// The states of the next step, before they become the slot's table.
+    states: Vec<log::Shared<S>>,
+}
+
+impl<S, E> Default for AdvanceScratch<S, E> {
+    fn default() -> Self {
+        AdvanceScratch {
+            landings: PerOwnCell::default(),
+            outs: Vec::new(),
+            states: Vec::new(),
+        }
+    }
+}
+
 /// One logical process (see the module doc).
 pub struct World<M: CellModel> {
     /// Its id.
@@ -128,6 +148,9 @@ pub struct World<M: CellModel> {
     scratch: Vec<M::State>,
     /// Scratch for `compute`: the home cell of each body it produced.
     homes_scratch: Vec<u32>,
+    /// Scratch for `advance`: its per-cell tables, kept between steps (a step of a large,
+    /// mostly empty territory would otherwise allocate and zero them afresh).
+    advance_scratch: AdvanceScratch<M::State, M::Event>,
     /// The hints and cells at rest of the step being advanced (`advance`, `compute`).
     prepared: prepared::Prepared,
     /// Its part of the run trace, when recording.

@@ -3,7 +3,7 @@
 //! Rollback-and-Propagate's re-execution with early cut-off (SPEC.md §K4, §K5).
 
 use super::chunked::Chunked;
-use super::index::{cells_around, OwnCell, PerOwnCell};
+use super::index::{cells_around, OwnCell};
 use super::keys::MigrationIn;
 use super::log::{same_allocation, share, view, Out, Shared};
 use super::World;
@@ -396,14 +396,17 @@ impl<M: CellModel> World<M> {
         let i = self.si(h);
         let n = self.cells.len();
         // How many own cells' outputs land in each own cell (each output counted once).
-        let mut landings: PerOwnCell<u32> = vec![0; n].into();
+        let mut scratch = std::mem::take(&mut self.advance_scratch);
+        let landings = &mut scratch.landings;
+        landings.reset(n, 0);
         let mut migs: BTreeSet<(OwnCell, WorldId)> = BTreeSet::new();
         // Every cell of step h reads the states of h: their hints and whether they are at
         // rest are worked out once (again if the interior was computed ahead: views may
         // have changed since).
         self.prepare(h);
         // The outputs, written into the slot at once (no copy-on-write per cell).
-        let mut outs = Vec::with_capacity(n);
+        let outs = &mut scratch.outs;
+        debug_assert!(outs.is_empty());
         for x in OwnCell::all(n) {
             // An empty cell was not computed ahead (nor is it computed now).
             let o = if self.slots[i].state(x).is_empty() {
@@ -432,7 +435,7 @@ impl<M: CellModel> World<M> {
             }
             outs.push(Some(o));
         }
-        self.slots[i].outs = Chunked::from_vec(outs);
+        self.slots[i].outs = Chunked::drain_from(outs);
         // A straggler may change the states of h: a re-execution computes them afresh.
         self.prepared.clear();
         self.early = None;
@@ -461,7 +464,9 @@ impl<M: CellModel> World<M> {
             next.states.iter().all(Option::is_none),
             "h + 1 is not built yet"
         );
-        let mut states: Vec<Shared<M::State>> = vec![None; n];
+        let states = &mut scratch.states;
+        states.clear();
+        states.resize(n, None);
         for (x, &k) in landings.enumerate() {
             if k == 0 {
                 continue;
@@ -479,7 +484,8 @@ impl<M: CellModel> World<M> {
                 .and_then(|o| o.bodies.clone());
             states[x.index()] = bodies;
         }
-        self.slots[i + 1].states = Chunked::from_vec(states);
+        self.slots[i + 1].states = Chunked::drain_from(states);
+        self.advance_scratch = scratch;
         for d in general {
             self.rebuild_state(d, h + 1);
         }

@@ -116,6 +116,7 @@ impl<M: CellModel> World<M> {
             most_held: 0,
             scratch: Vec::new(),
             homes_scratch: Vec::new(),
+            advance_scratch: Default::default(),
             prepared: Default::default(),
             record: None,
             origin: step,
