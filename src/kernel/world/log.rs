@@ -5,7 +5,7 @@
 use super::chunked::Chunked;
 use super::index::{MarginCell, OwnCell, PerOwnCell};
 use super::keys::{MigrationIn, RecvKey, SentKey};
-use super::territory::Nb;
+use super::territory::{Nb, NbKind};
 use super::World;
 use crate::frame::Event;
 use crate::kernel::message::{Bodies, EntityEdit, Homed};
@@ -295,10 +295,10 @@ impl<S: Clone, E: Clone> Slot<S, E> {
     /// nothing outside the grid.
     #[inline(always)]
     pub(super) fn neighbour(&self, n: Nb) -> &[S] {
-        match n {
-            Nb::Outside => &[],
-            Nb::Own(x) => self.state(x),
-            Nb::Margin(m) => self.ghost(m),
+        match n.kind() {
+            NbKind::Outside => &[],
+            NbKind::Own(x) => self.state(x),
+            NbKind::Margin(m) => self.ghost(m),
         }
     }
 

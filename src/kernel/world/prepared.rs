@@ -9,7 +9,7 @@
 
 use super::index::{MarginCell, OwnCell};
 use super::log::Slot;
-use super::territory::Nb;
+use super::territory::{Nb, NbKind};
 use crate::model::{CellModel, Hint, Neighbourhood, Step};
 
 /// The prepared facts about one step's states of a world's own and margin cells, laid out
@@ -48,10 +48,10 @@ fn in_global_order<'a>(cells: &'a [u32], margin: &'a [u32]) -> impl Iterator<Ite
         let own = x < cells.len() && (m == margin.len() || cells[x] < margin[m]);
         if own {
             x += 1;
-            Some(Nb::Own(OwnCell::from_local(x as u32 - 1)))
+            Some(Nb::own(OwnCell::from_local(x as u32 - 1)))
         } else if m < margin.len() {
             m += 1;
-            Some(Nb::Margin(MarginCell::at(m - 1)))
+            Some(Nb::margin(MarginCell::at(m - 1)))
         } else {
             None
         }
@@ -87,8 +87,8 @@ impl Prepared {
                 start: total,
                 rest: states.iter().all(|s| model.at_rest(s)),
             };
-            match n {
-                Nb::Own(_) => self.own.push(facts),
+            match n.kind() {
+                NbKind::Own(_) => self.own.push(facts),
                 _ => self.margin.push(facts),
             }
             total += states.len() as u32;
@@ -135,10 +135,10 @@ impl Prepared {
 
     /// The facts of neighbour `n` (`None` outside the grid).
     fn facts(&self, n: Nb) -> Option<&CellFacts> {
-        match n {
-            Nb::Outside => None,
-            Nb::Own(x) => Some(&self.own[x.index()]),
-            Nb::Margin(m) => Some(&self.margin[m.index()]),
+        match n.kind() {
+            NbKind::Outside => None,
+            NbKind::Own(x) => Some(&self.own[x.index()]),
+            NbKind::Margin(m) => Some(&self.margin[m.index()]),
         }
     }
 

@@ -4,7 +4,7 @@
 
 use super::index::OwnCell;
 use super::keys::RecvKey;
-use super::territory::Nb;
+use super::territory::NbKind;
 use super::World;
 use crate::kernel::config::RollbackMode;
 use crate::kernel::message::MessageKind;
@@ -32,8 +32,8 @@ impl<M: CellModel> World<M> {
             .copied()
             .filter(|&x| {
                 !self.slots[i].state(x).is_empty()
-                    && self.nbrs[x].iter().any(|nb| match *nb {
-                        Nb::Margin(m) => self.announced(self.margin[m.index()], i),
+                    && self.nbrs[x].iter().any(|nb| match nb.kind() {
+                        NbKind::Margin(m) => self.announced(self.margin[m.index()], i),
                         _ => false,
                     })
             })

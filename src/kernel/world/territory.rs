@@ -14,15 +14,55 @@ use crate::state::CellStates;
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::sync::Arc;
 
-/// Where the state of one neighbour of an own cell is held.
-#[derive(Clone, Copy, Debug)]
-pub(super) enum Nb {
+/// Where the state of one neighbour of an own cell is held, packed in 4 bytes: every cell
+/// computation reads its 27 from the world's table, which for a large territory is larger
+/// than a core's cache (see [`NbKind`] for what it says).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Nb(u32);
+
+/// What an [`Nb`] says.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum NbKind {
     /// Outside the grid: always empty.
     Outside,
     /// An own cell.
     Own(OwnCell),
     /// A margin cell.
     Margin(MarginCell),
+}
+
+impl Nb {
+    /// The bit that marks a margin cell.
+    const MARGIN: u32 = 1 << 31;
+
+    /// Outside the grid.
+    pub(super) const OUTSIDE: Nb = Nb(u32::MAX);
+
+    /// Own cell `x`.
+    pub(super) fn own(x: OwnCell) -> Nb {
+        let i = u32::try_from(x.index()).expect("fewer than 2^31 own cells");
+        assert!(i < Self::MARGIN, "fewer than 2^31 own cells");
+        Nb(i)
+    }
+
+    /// Margin cell `m`.
+    pub(super) fn margin(m: MarginCell) -> Nb {
+        let i = u32::try_from(m.index()).expect("fewer than 2^31 - 1 margin cells");
+        assert!(i < Self::MARGIN - 1, "fewer than 2^31 - 1 margin cells");
+        Nb(Self::MARGIN | i)
+    }
+
+    /// What it says.
+    #[inline(always)]
+    pub(super) fn kind(self) -> NbKind {
+        if self.0 < Self::MARGIN {
+            NbKind::Own(OwnCell::from_local(self.0))
+        } else if self == Self::OUTSIDE {
+            NbKind::Outside
+        } else {
+            NbKind::Margin(MarginCell::at((self.0 & !Self::MARGIN) as usize))
+        }
+    }
 }
 
 impl<M: CellModel> World<M> {
@@ -67,13 +107,13 @@ impl<M: CellModel> World<M> {
                 std::array::from_fn(|k| {
                     let n = c.offset(Neighbourhood::<M::State>::offset(k));
                     if !grid.contains(n) {
-                        return Nb::Outside;
+                        return Nb::OUTSIDE;
                     }
                     let ni = grid.index(n) as u32;
                     if part.owner(ni) == id {
-                        Nb::Own(OwnCell::from_local(part.local(ni)))
+                        Nb::own(OwnCell::from_local(part.local(ni)))
                     } else {
-                        Nb::Margin(MarginCell::at(
+                        Nb::margin(MarginCell::at(
                             margin.binary_search(&ni).expect("a neighbour"),
                         ))
                     }
@@ -145,5 +185,24 @@ impl<M: CellModel> World<M> {
             .binary_search(&cell)
             .unwrap_or_else(|_| panic!("cell {cell} is not next to world {}", self.id));
         MarginCell::at(position)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_packed_neighbour_says_what_it_was_built_from() {
+        for i in [0u32, 1, 77, (1 << 31) - 1] {
+            let x = OwnCell::from_local(i);
+            assert_eq!(Nb::own(x).kind(), NbKind::Own(x));
+        }
+        for i in [0usize, 1, 77, (1 << 31) - 2] {
+            let m = MarginCell::at(i);
+            assert_eq!(Nb::margin(m).kind(), NbKind::Margin(m));
+        }
+        assert_eq!(Nb::OUTSIDE.kind(), NbKind::Outside);
+        assert_eq!(std::mem::size_of::<Nb>(), 4);
     }
 }
