@@ -140,6 +140,67 @@ impl CellModel for PanicAt {
     }
 }
 
+/// A synthetic model whose states count the steps, and whose hash panics on a state of a
+/// chosen step: the frame finisher, not a world, meets the panic.
+#[derive(Clone)]
+struct HashPanicsAt;
+
+/// The step whose states [`HashPanicsAt`] cannot hash.
+const UNHASHABLE_STEP: u32 = 5;
+
+impl CellModel for HashPanicsAt {
+    type State = (BodyId, [f32; 3], u32);
+    type Event = soda::LeftGrid;
+    fn id(s: &Self::State) -> BodyId {
+        s.0
+    }
+    fn position(s: &Self::State) -> [f32; 3] {
+        s.1
+    }
+    fn step_cell(
+        &self,
+        _step: Step,
+        _grid: &Grid,
+        nb: &Neighbourhood<'_, Self::State>,
+        out: &mut Vec<Self::State>,
+        _events: &mut Vec<Event<soda::LeftGrid>>,
+    ) {
+        out.extend(nb.own().iter().map(|&(id, p, n)| (id, p, n + 1)));
+    }
+    fn hash_state(s: &Self::State, h: &mut StateHash) {
+        assert!(s.2 != UNHASHABLE_STEP, "planted hash panic");
+        h.u32(s.2);
+    }
+}
+
+#[test]
+fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
+    let grid = Grid::covering(
+        soda::math::Vec3::zeros(),
+        soda::math::Vec3::new(8.0, 8.0, 8.0),
+        1.0,
+    );
+    let bodies: Vec<(BodyId, [f32; 3], u32)> = (0..64)
+        .map(|i| (i, [0.5 + (i % 8) as f32, 0.5 + (i / 8) as f32, 0.5], 0))
+        .collect();
+    for threads in [1, 2] {
+        let config = KernelConfig::new(2).window(8);
+        let err = run_threaded(
+            HashPanicsAt,
+            grid.clone(),
+            bodies.clone(),
+            &config,
+            threads,
+            20,
+        )
+        .unwrap_err();
+        let text = err.to_string();
+        assert!(matches!(err, ExecError::Thread(_)), "{text}");
+        assert!(text.contains("frame finisher panicked at step 5"), "{text}");
+        assert!(text.contains("planted hash panic"), "{text}");
+    }
+}
+
 #[test]
 fn a_panicking_world_ends_the_run_with_an_error_naming_world_and_step() {
     let grid = Grid::covering(

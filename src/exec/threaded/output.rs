@@ -1,15 +1,18 @@
 //! Committed frames: each world hands its states of the steps below GVT to the frame
-//! assembly; a step every world contributed is queued whole, in step order, for the output
-//! stage (the calling thread), which sorts, hashes and hands it to the sink.
+//! assembly; a step every world contributed is queued whole, in step order, for the
+//! finisher thread, which sorts and hashes it; the output stage (the calling thread) hands
+//! the finished frames to the sink.
 
 use super::report::ThreadTimes;
 use super::shared::{RunStatus, SharedRun, ThreadedWorld};
-use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
+use crate::exec::error::ExecError;
+use crate::exec::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex, ThreadPanicked};
 use crate::exec::LastFrame;
 use crate::frame::{Event, Frame, StatesWanted};
 use crate::kernel::trace::GvtSample;
 use crate::model::{CellModel, Step};
 use std::collections::{BTreeMap, VecDeque};
+use std::panic::{catch_unwind, AssertUnwindSafe};
 
 /// Committed steps being assembled from the worlds' contributions.
 pub(super) struct Assembly<M: CellModel> {
@@ -122,6 +125,69 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
 /// Finishes committed step `t` from every world's contribution
 /// ([`crate::exec::next_frame`]: a step no world's cells changed at keeps the hash of
 /// `last`, the step before) and, if `wanted` asks for them, clones its sorted states.
+/// A committed step the finisher sorted and hashed: its frame, and its states if the sink
+/// asked for them.
+pub(super) struct FinishedFrame<M: CellModel> {
+    /// The step.
+    pub(super) step: Step,
+    /// Its frame.
+    pub(super) frame: Frame<M::Event>,
+    /// Its states, sorted by id, if wanted.
+    pub(super) states: Option<Vec<M::State>>,
+}
+
+/// The finisher's poll pace while nothing is pending (a short sleep: it is one stage of the
+/// path from a committed step to the sink, and the run waits for the sink).
+const FINISHER_PAUSE: u32 = 64;
+
+impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
+    /// The finisher thread: sorts and hashes each committed step as it comes (the work
+    /// the reference executor does at each step, [`finish_frame`]), at the lowest
+    /// priority, so it runs on the time the workers leave free instead of taking a
+    /// worker's core in the middle of a step its neighbour world waits for. Returns once
+    /// the run is `closing` and nothing is pending. Steps after the sink stopped the run
+    /// are dropped unfinished.
+    pub(super) fn finisher_loop(&self, wanted: StatesWanted) {
+        F::run_in_background();
+        let mut last = None;
+        loop {
+            let batch = std::mem::take(&mut self.out.lock().pending);
+            if batch.is_empty() {
+                // Nothing can be pending once closing: the workers have returned.
+                if self.closing.load() == 1 {
+                    return;
+                }
+                F::pause(FINISHER_PAUSE);
+                continue;
+            }
+            for (step, partial) in batch {
+                if self.stop.load() == 1 {
+                    continue;
+                }
+                // A model's hash panicking stops the run with an error instead of leaving
+                // the workers waiting for a sink that no frame reaches.
+                let finished = catch_unwind(AssertUnwindSafe(|| {
+                    finish_frame::<M>(step, partial, &wanted, &mut last)
+                }));
+                match finished {
+                    Ok((frame, states)) => self.finished.lock().push_back(FinishedFrame {
+                        step,
+                        frame,
+                        states,
+                    }),
+                    Err(p) => {
+                        self.fail(ExecError::Thread(ThreadPanicked(format!(
+                            "the frame finisher panicked at step {step}: {}",
+                            panic_message(&*p)
+                        ))));
+                        return;
+                    }
+                }
+            }
+        }
+    }
+}
+
 pub(super) fn finish_frame<M: CellModel>(
     t: Step,
     p: Partial<M>,

@@ -3,7 +3,7 @@
 //! meanwhile, and between epochs a balancing round may move cells.
 
 use super::options::{ThreadedOptions, ThreadedSetup};
-use super::output::{finish_frame, Assembly, Output, Partial};
+use super::output::{Assembly, FinishedFrame, Output};
 use super::report::ThreadedReport;
 use super::shared::{InputLog, RunStatus, SharedRun, ThreadedWorld, UNDELIVERED_WINDOWS};
 use crate::exec::control::RunControl;
@@ -126,6 +126,8 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
             next: 1,
         }),
         out: F::Mutex::new(Output::default()),
+        finished: F::Mutex::new(VecDeque::new()),
+        closing: F::Atomic::new(0),
         error: F::Mutex::new(None),
         inputs: F::Mutex::new(InputLog {
             count: 0,
@@ -143,12 +145,20 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     let mut frames = Vec::new();
     let mut delivered = 0u64;
     let mut stopped = false;
-    // The last frame finished: a step no cell changed at keeps its hash.
-    let mut last_frame = None;
+    // The finisher sorts and hashes the committed steps for the whole run (all epochs).
+    let finisher = {
+        let shared = shared.clone();
+        let wanted = wanted.clone();
+        F::spawn(move || shared.finisher_loop(wanted))
+    };
     let poster = shared.clone();
-    let mut deliver = |batch: VecDeque<(Step, Partial<M>)>| {
-        for (t, partial) in batch {
-            let (frame, states) = finish_frame::<M>(t, partial, wanted, &mut last_frame);
+    let mut deliver = |batch: VecDeque<FinishedFrame<M>>| {
+        for FinishedFrame {
+            step: t,
+            frame,
+            states,
+        } in batch
+        {
             if delivered < steps && !stopped {
                 delivered += 1;
                 let refs: Option<Vec<&M::State>> = states.as_ref().map(|v| v.iter().collect());
@@ -178,73 +188,87 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     };
     let mut busy_total = vec![0.0f64; n];
     let mut last_round: Step = 0;
-    loop {
-        run_epoch(&shared, threads, &mut deliver)?;
-        let committed = shared.committed.load();
-        if committed >= steps || steps == 0 || shared.stop.load() == 1 {
-            break;
-        }
-        // A balancing round at the epoch's last step: every world has contributed it, so
-        // GVT = committed + 1 and every state at `committed` is final.
-        let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
-        let span = (committed - last_round).max(1) as f64;
-        let loads: Vec<f64> = locked
-            .iter()
-            .map(|s| {
-                let computed = s.world.counters().cells_computed;
-                s.meter.load(config.balance.load, computed, span)
-            })
-            .collect();
-        let leads: Vec<f64> = locked.iter().map(|s| s.meter.mean_lead()).collect();
-        for (w, s) in locked.iter_mut().enumerate() {
-            busy_total[w] += s.meter.busy_seconds();
-            let computed = s.world.counters().cells_computed;
-            s.meter.restart(computed);
-        }
-        let moved = crate::exec::balance_round(
-            &mut balancer,
-            &grid,
-            &partition,
-            locked.iter_mut().map(|s| &mut s.world),
-            &loads,
-            &leads,
-            committed,
-        );
-        last_round = committed;
-        epoch_end = steps.min(balancer.next_round_after(committed));
-        if let Some(p) = moved {
-            partition = p;
-            // Messages in transit belong to the old owner map: the worlds start again.
-            for (w, inbox) in shared.inboxes.iter().enumerate() {
-                inbox.lock().clear();
-                shared.inbox_min[w].store(u64::MAX);
+    // The epochs; however they end, the finisher is then stopped and joined.
+    let mut epochs = || -> Result<(), ExecError> {
+        loop {
+            run_epoch(&shared, threads, &mut deliver)?;
+            let committed = shared.committed.load();
+            if committed >= steps || steps == 0 || shared.stop.load() == 1 {
+                break;
             }
-            let restart = crate::exec::restart_worlds(
+            // A balancing round at the epoch's last step: every world has contributed it, so
+            // GVT = committed + 1 and every state at `committed` is final.
+            let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
+            let span = (committed - last_round).max(1) as f64;
+            let loads: Vec<f64> = locked
+                .iter()
+                .map(|s| {
+                    let computed = s.world.counters().cells_computed;
+                    s.meter.load(config.balance.load, computed, span)
+                })
+                .collect();
+            let leads: Vec<f64> = locked.iter().map(|s| s.meter.mean_lead()).collect();
+            for (w, s) in locked.iter_mut().enumerate() {
+                busy_total[w] += s.meter.busy_seconds();
+                let computed = s.world.counters().cells_computed;
+                s.meter.restart(computed);
+            }
+            let moved = crate::exec::balance_round(
+                &mut balancer,
+                &grid,
+                &partition,
                 locked.iter_mut().map(|s| &mut s.world),
-                &shared.inputs.lock().posted,
+                &loads,
+                &leads,
                 committed,
             );
-            let reposted = restart
-                .pending_inputs
-                .iter()
-                .flat_map(|m| crate::exec::to_every_world(m, n));
-            for m in restart.started.into_iter().chain(reposted) {
-                let d = m.dst_world as usize;
-                let affects = m.affects();
-                shared.inboxes[d].lock().push(m);
-                shared.lower(&shared.inbox_min[d], affects);
+            last_round = committed;
+            epoch_end = steps.min(balancer.next_round_after(committed));
+            if let Some(p) = moved {
+                partition = p;
+                // Messages in transit belong to the old owner map: the worlds start again.
+                for (w, inbox) in shared.inboxes.iter().enumerate() {
+                    inbox.lock().clear();
+                    shared.inbox_min[w].store(u64::MAX);
+                }
+                let restart = crate::exec::restart_worlds(
+                    locked.iter_mut().map(|s| &mut s.world),
+                    &shared.inputs.lock().posted,
+                    committed,
+                );
+                let reposted = restart
+                    .pending_inputs
+                    .iter()
+                    .flat_map(|m| crate::exec::to_every_world(m, n));
+                for m in restart.started.into_iter().chain(reposted) {
+                    let d = m.dst_world as usize;
+                    let affects = m.affects();
+                    shared.inboxes[d].lock().push(m);
+                    shared.lower(&shared.inbox_min[d], affects);
+                }
             }
+            for (w, s) in locked.iter_mut().enumerate() {
+                s.world.set_end(epoch_end);
+                shared.published[w].store(s.world.bound());
+            }
+            drop(locked);
+            shared.target.store(epoch_end);
+            shared.set_status(RunStatus::Running);
         }
-        for (w, s) in locked.iter_mut().enumerate() {
-            s.world.set_end(epoch_end);
-            shared.published[w].store(s.world.bound());
-        }
-        drop(locked);
-        shared.target.store(epoch_end);
-        shared.set_status(RunStatus::Running);
+        Ok(())
+    };
+    let epochs = epochs();
+    // No more committed steps: the finisher finishes what is pending and returns.
+    shared.closing.store(1);
+    let finisher = F::join(finisher);
+    epochs?;
+    finisher.map_err(ExecError::Thread)?;
+    // The finisher may have failed after the workers were done.
+    if let Some(e) = shared.error.lock().take() {
+        return Err(e);
     }
-    let mut out = std::mem::take(&mut *shared.out.lock());
-    deliver(std::mem::take(&mut out.pending));
+    deliver(std::mem::take(&mut *shared.finished.lock()));
+    let out = std::mem::take(&mut *shared.out.lock());
     let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
     for (w, s) in locked.iter_mut().enumerate() {
         busy_total[w] += s.meter.busy_seconds();
@@ -274,7 +298,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
 fn run_epoch<M: CellModel + 'static, F: Facade>(
     shared: &Arc<SharedRun<M, F>>,
     threads: usize,
-    deliver: &mut impl FnMut(VecDeque<(Step, Partial<M>)>),
+    deliver: &mut impl FnMut(VecDeque<FinishedFrame<M>>),
 ) -> Result<(), ExecError> {
     // Tasks left from an earlier epoch are stale: every world is queued once again.
     shared.sched.lock().reset();
@@ -289,7 +313,7 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
         })
         .collect();
     while shared.status() == RunStatus::Running {
-        let batch = std::mem::take(&mut shared.out.lock().pending);
+        let batch = std::mem::take(&mut *shared.finished.lock());
         if batch.is_empty() {
             F::pause(OUTPUT_PAUSE);
         } else {

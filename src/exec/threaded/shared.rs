@@ -1,7 +1,7 @@
 //! The state of a threaded run that the worker threads and the output stage share, and its
 //! basic operations: the run status, queueing a world, sending a message, posting an input.
 
-use super::output::{Assembly, Output};
+use super::output::{Assembly, FinishedFrame, Output};
 use crate::exec::error::{ExecError, InputError};
 use crate::exec::load::LoadMeter;
 use crate::exec::schedule::Schedule;
@@ -12,6 +12,7 @@ use crate::kernel::world::World;
 use crate::model::{CellModel, Step};
 use crossbeam_deque::Injector;
 use std::cmp::Reverse;
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -102,8 +103,14 @@ pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     pub(super) compute_ahead: bool,
     /// Committed steps being assembled from the worlds' contributions.
     pub(super) assembly: F::Mutex<Assembly<M>>,
-    /// Whole committed steps waiting for the output stage, and the run's statistics.
+    /// Whole committed steps waiting for the finisher, and the run's statistics.
     pub(super) out: F::Mutex<Output<M>>,
+    /// Frames the finisher sorted and hashed, in step order, waiting for the output stage
+    /// (the calling thread, which hands them to the sink).
+    pub(super) finished: F::Mutex<VecDeque<FinishedFrame<M>>>,
+    /// 1 once no more committed steps will come: the finisher finishes what is pending and
+    /// returns.
+    pub(super) closing: F::Atomic,
     /// The first error of the run (a world panicked, the run stalled).
     pub(super) error: F::Mutex<Option<ExecError>>,
     /// The inputs posted so far: their number (the next input's sequence number) and one
