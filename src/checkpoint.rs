@@ -41,7 +41,7 @@ pub trait ExactState: Sized {
 
 /// The [`Wire`](crate::model::Wire) of a model whose states are [`ExactState`]: states as
 /// their exact words, event kinds as `event_to_word` and `event_from_word` say
-/// ([`CellModel::wire`](crate::CellModel::wire)).
+/// ([`CellModel::wire`]).
 pub fn exact_wire<S: ExactState, E>(
     event_to_word: fn(&E) -> u64,
     event_from_word: fn(u64) -> Option<E>,

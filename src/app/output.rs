@@ -14,7 +14,7 @@ pub fn print(text: &str) -> Result<()> {
         .context("cannot write to standard output")
 }
 
-/// Writes `args` and a newline to stdout, as [`print`]: `print_line(format_args!(...))?`
+/// Writes `args` and a newline to stdout, as [`print!`]: `print_line(format_args!(...))?`
 /// where `println!(...)` would panic.
 pub fn print_line(args: std::fmt::Arguments<'_>) -> Result<()> {
     let mut out = std::io::stdout().lock();

@@ -894,7 +894,7 @@ impl CellModel for RigidBodyModel {
 
     /// The body's position and the reach of the candidate filter of
     /// [`step_cell`](CellModel::step_cell), `sweep + motion` of its broad-phase
-    /// [`Candidate`]: computed once per body and step instead of once per neighbourhood
+    /// `Candidate`: computed once per body and step instead of once per neighbourhood
     /// that holds it.
     fn hint(&self, b: &Body) -> Option<Hint> {
         let c = Candidate::new(b, [0; 3], self.dt, self.prediction());
