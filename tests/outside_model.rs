@@ -107,11 +107,20 @@ fn inputs_injected_during_the_run_equal_the_same_inputs_scripted() {
             .run(60, |f, _, control| {
                 got.push(f.hash);
                 if f.step == 10 {
-                    let step = control.earliest_input_step().max(25);
-                    assert!(step < 60, "the run is still open at step 10");
-                    control
-                        .input(step, Input::Spawn(spawned(u64::MAX - 5)))
-                        .expect("the earliest open step takes an input");
+                    // The earliest open step is a snapshot (and in conservative mode a
+                    // lower bound): a refused step names the one to retry at.
+                    let mut step = control.earliest_input_step().max(25);
+                    loop {
+                        assert!(step < 60, "the run is still open at step 10");
+                        match control.input(step, Input::Spawn(spawned(u64::MAX - 5))) {
+                            Ok(()) => break,
+                            Err(InputError::TooLate { earliest, .. }) => {
+                                assert!(earliest > step, "a refusal names a later step");
+                                step = earliest;
+                            }
+                            Err(e) => panic!("{e}"),
+                        }
+                    }
                     stamped = Some(step);
                 }
             })

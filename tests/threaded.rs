@@ -183,21 +183,32 @@ fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
     let bodies: Vec<(BodyId, [f32; 3], u32)> = (0..64)
         .map(|i| (i, [0.5 + (i % 8) as f32, 0.5 + (i / 8) as f32, 0.5], 0))
         .collect();
+    // With balancing every 5 steps the panic meets the end of an epoch: the failure must
+    // not be lost when the next epoch starts.
+    let balancing = soda::kernel::BalanceConfig {
+        period: u64::from(UNHASHABLE_STEP),
+        backoff: false,
+        ..soda::kernel::BalanceConfig::on()
+    };
     for threads in [1, 2] {
-        let config = KernelConfig::new(2).window(8);
-        let err = run_threaded(
-            HashPanicsAt,
-            grid.clone(),
-            bodies.clone(),
-            &config,
-            threads,
-            20,
-        )
-        .unwrap_err();
-        let text = err.to_string();
-        assert!(matches!(err, ExecError::Thread(_)), "{text}");
-        assert!(text.contains("frame finisher panicked at step 5"), "{text}");
-        assert!(text.contains("planted hash panic"), "{text}");
+        for config in [
+            KernelConfig::new(2).window(8),
+            KernelConfig::new(2).window(8).balance(balancing.clone()),
+        ] {
+            let err = run_threaded(
+                HashPanicsAt,
+                grid.clone(),
+                bodies.clone(),
+                &config,
+                threads,
+                40,
+            )
+            .unwrap_err();
+            let text = err.to_string();
+            assert!(matches!(err, ExecError::Thread(_)), "{text}");
+            assert!(text.contains("frame finisher panicked at step 5"), "{text}");
+            assert!(text.contains("planted hash panic"), "{text}");
+        }
     }
 }
 

@@ -43,8 +43,9 @@ pub enum ExecError {
         /// GVT at the stall.
         gvt: Step,
     },
-    /// A worker thread died outside a world's step.
-    #[error("worker thread failed: {0}")]
+    /// A thread of the executor died outside a world's step (a worker, or the threaded
+    /// executor's frame finisher, whose message names the step it was finishing).
+    #[error("an executor thread failed: {0}")]
     Thread(#[from] ThreadPanicked),
     /// The MPI executor cannot run this (SPEC.md §14).
     #[error("{0}")]

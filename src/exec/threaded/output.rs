@@ -18,7 +18,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 pub(super) struct Assembly<M: CellModel> {
     /// The steps some worlds have contributed to, by step.
     pub(super) partial: BTreeMap<Step, Partial<M>>,
-    /// The next step to go to the output stage (when every world has contributed it).
+    /// The next step to go to the finisher (when every world has contributed it).
     pub(super) next: Step,
 }
 
@@ -35,9 +35,8 @@ pub(super) struct Partial<M: CellModel> {
     pub(super) unchanged: bool,
 }
 
-/// Committed steps waiting for the output stage (the calling thread), whole (every world
-/// contributed) but not yet sorted and hashed: the output stage finishes the frames, off the
-/// workers' critical path.
+/// Committed steps waiting for the finisher thread, whole (every world contributed) but not
+/// yet sorted and hashed: the finisher finishes the frames, off the workers' critical path.
 pub(super) struct Output<M: CellModel> {
     /// Whole committed steps, in step order.
     pub(super) pending: VecDeque<(Step, Partial<M>)>,
@@ -74,7 +73,7 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         // The cells' states are handed over as shared references, not copied: a copy of a
         // heavy world's ~1,000 states into fresh memory took ~3 ms now and then (page faults
         // on memory the allocator had returned), holding up the world and its neighbours.
-        // The output stage flattens them when it sorts and hashes the frame.
+        // The finisher flattens them when it sorts and hashes the frame.
         let mut assembly = self.assembly.lock();
         for t in held.contributed + 1..=last {
             let part = assembly.partial.entry(t).or_insert_with(|| Partial {
@@ -107,8 +106,8 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         if done.is_empty() {
             return;
         }
-        // Whole steps are queued under the assembly lock, so they reach the output stage in
-        // step order whichever thread completes them; the output stage sorts and hashes.
+        // Whole steps are queued under the assembly lock, so they reach the finisher in step
+        // order whichever thread completes them; the finisher sorts and hashes.
         let last_step = done.last().map_or(0, |d| d.0);
         self.out.lock().pending.extend(done);
         // Still under the assembly lock, so `committed` only grows: a thread that finished
@@ -122,9 +121,6 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
     }
 }
 
-/// Finishes committed step `t` from every world's contribution
-/// ([`crate::exec::next_frame`]: a step no world's cells changed at keeps the hash of
-/// `last`, the step before) and, if `wanted` asks for them, clones its sorted states.
 /// A committed step the finisher sorted and hashed: its frame, and its states if the sink
 /// asked for them.
 pub(super) struct FinishedFrame<M: CellModel> {
@@ -145,23 +141,25 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
     /// the reference executor does at each step, [`finish_frame`]), at the lowest
     /// priority, so it runs on the time the workers leave free instead of taking a
     /// worker's core in the middle of a step its neighbour world waits for. Returns once
-    /// the run is `closing` and nothing is pending. Steps after the sink stopped the run
-    /// are dropped unfinished.
+    /// the run is `closing` and nothing is pending. Steps after the sink stopped the run,
+    /// or after it failed, are dropped unfinished.
     pub(super) fn finisher_loop(&self, wanted: StatesWanted) {
         F::run_in_background();
         let mut last = None;
         loop {
+            // `closing` is read before the queue is taken: it is stored after the workers
+            // have returned, so once it reads 1 every step they queued is in this take.
+            let closing = self.closing.load() == 1;
             let batch = std::mem::take(&mut self.out.lock().pending);
             if batch.is_empty() {
-                // Nothing can be pending once closing: the workers have returned.
-                if self.closing.load() == 1 {
+                if closing {
                     return;
                 }
                 F::pause(FINISHER_PAUSE);
                 continue;
             }
             for (step, partial) in batch {
-                if self.stop.load() == 1 {
+                if self.stop.load() == 1 || self.status() == RunStatus::Failed {
                     continue;
                 }
                 // A model's hash panicking stops the run with an error instead of leaving
@@ -188,6 +186,9 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
     }
 }
 
+/// Finishes committed step `t` from every world's contribution
+/// ([`crate::exec::next_frame`]: a step no world's cells changed at keeps the hash of
+/// `last`, the step before) and, if `wanted` asks for them, clones its sorted states.
 pub(super) fn finish_frame<M: CellModel>(
     t: Step,
     p: Partial<M>,

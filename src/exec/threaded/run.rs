@@ -151,6 +151,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         let wanted = wanted.clone();
         F::spawn(move || shared.finisher_loop(wanted))
     };
+    let closing = Closing(&shared);
     let poster = shared.clone();
     let mut deliver = |batch: VecDeque<FinishedFrame<M>>| {
         for FinishedFrame {
@@ -253,13 +254,21 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
             }
             drop(locked);
             shared.target.store(epoch_end);
+            // The finisher may have failed since the epoch ended (it runs behind): the
+            // restart is decided under the error lock, which `fail` holds while it marks
+            // the run failed, so a failure is never overwritten by `Running`.
+            let error = shared.error.lock();
+            if error.is_some() {
+                break;
+            }
             shared.set_status(RunStatus::Running);
+            drop(error);
         }
         Ok(())
     };
     let epochs = epochs();
     // No more committed steps: the finisher finishes what is pending and returns.
-    shared.closing.store(1);
+    drop(closing);
     let finisher = F::join(finisher);
     epochs?;
     finisher.map_err(ExecError::Thread)?;
@@ -269,6 +278,10 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     }
     deliver(std::mem::take(&mut *shared.finished.lock()));
     let out = std::mem::take(&mut *shared.out.lock());
+    debug_assert!(
+        out.pending.is_empty() || shared.stop.load() == 1,
+        "the finisher finished every committed step"
+    );
     let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
     for (w, s) in locked.iter_mut().enumerate() {
         busy_total[w] += s.meter.busy_seconds();
@@ -291,6 +304,21 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         trace,
         balance: balancer.history().to_vec(),
     })
+}
+
+/// Tells the finisher that no more committed steps will come when the calling thread
+/// leaves the run, however it leaves it: if a sink panics, the run is also stopped, so
+/// neither the workers nor the finisher go on without it.
+struct Closing<'a, M: CellModel + 'static, F: Facade>(&'a SharedRun<M, F>);
+
+impl<M: CellModel + 'static, F: Facade> Drop for Closing<'_, M, F> {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            self.0.stop.store(1);
+            self.0.set_status(RunStatus::Done);
+        }
+        self.0.closing.store(1);
+    }
 }
 
 /// One epoch: every world is queued, `threads` workers run until the epoch's last step is

@@ -1,5 +1,6 @@
-//! The state of a threaded run that the worker threads and the output stage share, and its
-//! basic operations: the run status, queueing a world, sending a message, posting an input.
+//! The state of a threaded run that the worker threads, the finisher and the output stage
+//! share, and its basic operations: the run status, queueing a world, sending a message,
+//! posting an input.
 
 use super::output::{Assembly, FinishedFrame, Output};
 use crate::exec::error::{ExecError, InputError};
@@ -45,7 +46,8 @@ impl RunStatus {
 /// sink must slow the run, not grow it (SPEC.md §K7).
 pub(super) const UNDELIVERED_WINDOWS: Step = 4;
 
-/// The state of a threaded run that the worker threads and the output stage share.
+/// The state of a threaded run that the worker threads, the finisher and the output stage
+/// share.
 pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     /// The worlds, each under its own lock (a world runs on one thread at a time).
     pub(super) worlds: Vec<F::Mutex<ThreadedWorld<M>>>,
@@ -77,7 +79,7 @@ pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     pub(super) waiting: Injector<(usize, u64)>,
     /// The current GVT.
     pub(super) gvt: F::Atomic,
-    /// The last step whose frame went to the output stage (0 before any).
+    /// The last step whose frame went to the finisher (0 before any).
     pub(super) committed: F::Atomic,
     /// The last step the sink has been handed (0 before any).
     pub(super) delivered: F::Atomic,
