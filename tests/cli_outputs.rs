@@ -624,17 +624,20 @@ fn a_checkpoint_of_a_run_without_steps_is_refused_before_the_run() {
 #[test]
 fn more_worlds_than_cells_is_run_with_a_warning_naming_the_grid() {
     // falling-cubes with 27 cubes has a 9 x 4 x 9 grid: 324 cells.
-    let out = soda(&[
-        "run",
-        "--objects",
-        "27",
-        "--steps",
-        "2",
-        "--executor",
-        "virtual",
-        "--worlds",
-        "500",
-    ]);
+    let with_worlds = |worlds: &str| {
+        soda(&[
+            "run",
+            "--objects",
+            "27",
+            "--steps",
+            "2",
+            "--executor",
+            "virtual",
+            "--worlds",
+            worlds,
+        ])
+    };
+    let out = with_worlds("500");
     assert!(out.status.success(), "{}", stderr(&out));
     let err = stderr(&out);
     assert!(
@@ -643,16 +646,6 @@ fn more_worlds_than_cells_is_run_with_a_warning_naming_the_grid() {
             && err.contains("--worlds 324 or fewer"),
         "{err}"
     );
-    let out = soda(&[
-        "run",
-        "--objects",
-        "27",
-        "--steps",
-        "2",
-        "--executor",
-        "virtual",
-        "--worlds",
-        "8",
-    ]);
+    let out = with_worlds("8");
     assert!(!stderr(&out).contains("own no cell"), "{}", stderr(&out));
 }

@@ -105,6 +105,20 @@ fn repeated_threaded_runs_in_every_mode_match_the_reference() {
     }
 }
 
+/// The grid and bodies of the planted-panic tests: an 8 m cube of 1 m cells and 64 bodies,
+/// one per cell of its bottom layer (id, position).
+fn planted_lattice() -> (Grid, Vec<(BodyId, [f32; 3])>) {
+    let grid = Grid::covering(
+        soda::math::Vec3::zeros(),
+        soda::math::Vec3::new(8.0, 8.0, 8.0),
+        1.0,
+    );
+    let bodies = (0..64)
+        .map(|i| (i, [0.5 + (i % 8) as f32, 0.5 + (i / 8) as f32, 0.5]))
+        .collect();
+    (grid, bodies)
+}
+
 /// A synthetic model whose step panics at a chosen step (the test-only hook).
 #[derive(Clone)]
 struct PanicAt {
@@ -175,14 +189,9 @@ impl CellModel for HashPanicsAt {
 
 #[test]
 fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
-    let grid = Grid::covering(
-        soda::math::Vec3::zeros(),
-        soda::math::Vec3::new(8.0, 8.0, 8.0),
-        1.0,
-    );
-    let bodies: Vec<(BodyId, [f32; 3], u32)> = (0..64)
-        .map(|i| (i, [0.5 + (i % 8) as f32, 0.5 + (i / 8) as f32, 0.5], 0))
-        .collect();
+    let (grid, places) = planted_lattice();
+    let bodies: Vec<(BodyId, [f32; 3], u32)> =
+        places.into_iter().map(|(id, p)| (id, p, 0)).collect();
     // With balancing every 5 steps the panic meets the end of an epoch: the failure must
     // not be lost when the next epoch starts.
     let balancing = soda::kernel::BalanceConfig {
@@ -214,14 +223,7 @@ fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
 
 #[test]
 fn a_panicking_world_ends_the_run_with_an_error_naming_world_and_step() {
-    let grid = Grid::covering(
-        soda::math::Vec3::zeros(),
-        soda::math::Vec3::new(8.0, 8.0, 8.0),
-        1.0,
-    );
-    let bodies: Vec<(BodyId, [f32; 3])> = (0..64)
-        .map(|i| (i, [0.5 + (i % 8) as f32, 0.5 + (i / 8) as f32, 0.5]))
-        .collect();
+    let (grid, bodies) = planted_lattice();
     for threads in [1, 2, 4] {
         let config = KernelConfig::new(4).window(8);
         let err = run_threaded(

@@ -370,13 +370,13 @@ impl<M: CellModel> World<M> {
         );
     }
 
-    /// The output of own cell `x` at the prepared step `h`: empty for an empty cell, its
-    /// state if its whole neighbourhood is at rest, else its computation.
+    /// The output of occupied own cell `x` at the prepared step `h`: its state if its whole
+    /// neighbourhood is at rest, else its computation. (Both callers skip empty cells, whose
+    /// output is [`Out::empty`].)
     pub(super) fn compute_or_keep(&mut self, x: OwnCell, h: Step) -> Out<M::State, M::Event> {
         let i = self.si(h);
-        if self.slots[i].state(x).is_empty() {
-            Out::empty(self.cells[x])
-        } else if self.prepared.keeps(x, h) {
+        debug_assert!(!self.slots[i].state(x).is_empty(), "an occupied cell");
+        if self.prepared.keeps(x, h) {
             // The model's promise (`CellModel::at_rest`, SPEC.md §4.1 rule 7): the output
             // is the cell's state, bit for bit, and no event. Counted as a computation,
             // which it stands for.
