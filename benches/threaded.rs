@@ -11,8 +11,11 @@
 //! GVT and idle time, and checks every committed hash against the reference's.
 //!
 //! It also times rapier3d (built with `parallel`) on the same bodies on 1 and `TH_THREADS`
-//! rayon threads. Wall times on a shared 2-core machine are noisy: compare within one run
+//! rayon threads (`TH_RAPIER=0` skips it). Wall times on a shared 2-core machine are noisy: compare within one run
 //! only.
+//!
+//! Every run uses the `soda` binary's allocator and its settings (`MIMALLOC_PURGE_DELAY=1000`
+//! restores mimalloc's default purging for comparison).
 //!
 //! Run: `cargo bench --bench threaded`; `cargo bench --bench threaded -- --test` (or
 //! `cargo test --benches`) runs a tiny version.
@@ -44,7 +47,13 @@ fn env(name: &str, default: &str, quick_value: &str) -> String {
     std::env::var(name).unwrap_or_else(|_| default.to_string())
 }
 
+/// The `soda` binary's allocator, with its settings (`soda::app::allocator`), for the
+/// reference and the threaded runs alike: what a user of the command line gets.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() {
+    soda::app::allocator::configure();
     let cubes: usize = env("TH_CUBES", "8000", "64").parse().expect("TH_CUBES");
     let steps: u64 = env("TH_STEPS", "600", "10").parse().expect("TH_STEPS");
     let threads: usize = env("TH_THREADS", "2", "2").parse().expect("TH_THREADS");
@@ -91,12 +100,14 @@ fn main() {
         pool.install(|| (0..steps).for_each(|_| world.step()));
         t.elapsed().as_secs_f64()
     };
-    let (r1, r2) = (rapier(1), rapier(threads));
-    println!(
-        "  rapier3d (parallel feature, sleeping on): 1 thread {r1:.2} s, {threads} threads {r2:.2} s = {:.2}x its 1-thread speed; SODA's reference is {:.1}x Rapier's 1-thread time",
-        r1 / r2,
-        tr / r1
-    );
+    if env("TH_RAPIER", "1", "1") != "0" {
+        let (r1, r2) = (rapier(1), rapier(threads));
+        println!(
+            "  rapier3d (parallel feature, sleeping on): 1 thread {r1:.2} s, {threads} threads {r2:.2} s = {:.2}x its 1-thread speed; SODA's reference is {:.1}x Rapier's 1-thread time",
+            r1 / r2,
+            tr / r1
+        );
+    }
     let cases: Vec<(usize, u64, u64, bool)> = worlds
         .iter()
         .flat_map(|&w| {

@@ -10,5 +10,7 @@ mod cli;
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> std::process::ExitCode {
+    // Before any thread starts: freed memory is kept for reuse (`soda::app::allocator`).
+    soda::app::allocator::configure();
     cli::main()
 }

@@ -376,6 +376,7 @@ pub(crate) fn parse_modes(s: &str) -> Result<Vec<RollbackMode>> {
 /// The command line for the models of `registry`: parses the process's arguments, runs the
 /// command, prints any error with its cause and returns exit status 1 (2 for usage errors).
 pub fn main_with(registry: Registry) -> ExitCode {
+    super::allocator::configure();
     let cli = ModelCli::parse();
     match dispatch(&registry, cli) {
         Ok(()) => ExitCode::SUCCESS,

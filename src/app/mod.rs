@@ -18,6 +18,7 @@
 //! The `soda` binary registers the example models ([`Registry::examples`]) besides its
 //! rigid-body scenes: `soda run --model epidemic`, `soda verify --model phold`.
 
+pub mod allocator;
 pub mod atomic;
 pub mod charts;
 pub mod checkpoint;
