@@ -52,7 +52,8 @@ pub trait Facade: Send + Sync + 'static {
     /// Waits for a thread; `Err` if it panicked.
     fn join(h: Self::Handle) -> Result<(), ThreadPanicked>;
     /// Gives the processor to another thread; `spins` counts consecutive idle calls so an
-    /// implementation may back off (`u32::MAX`: a poller that may sleep longest).
+    /// implementation may back off (`u32::MAX`: a poller nobody waits for, which may sleep
+    /// longest).
     fn pause(spins: u32);
     /// Makes the calling thread yield the processor to the others whenever they want it
     /// (the threaded executor's frame finisher: work that may wait, beside workers that
@@ -121,7 +122,7 @@ impl Facade for StdFacade {
     fn pause(spins: u32) {
         match spins {
             0..64 => std::thread::yield_now(),
-            u32::MAX => std::thread::sleep(std::time::Duration::from_micros(500)),
+            u32::MAX => std::thread::sleep(std::time::Duration::from_micros(2000)),
             _ => std::thread::sleep(std::time::Duration::from_micros(50)),
         }
     }

@@ -23,8 +23,17 @@ use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
 use std::time::Instant;
 
-/// The `spins` the output stage passes to [`Facade::pause`]: it polls at a slow pace.
+/// The `spins` the output stage passes to [`Facade::pause`] while nobody waits for it: it
+/// polls at a slow pace (2 ms with [`StdFacade`](crate::exec::sync::StdFacade)). Each poll
+/// wakes the calling thread, which on a machine with a core per worker takes a worker's core
+/// for a moment: at 0.5 ms that was a third of the threaded run's context switches on
+/// 8,000 cubes (docs/performance.md, "Round nine").
 const OUTPUT_PAUSE: u32 = u32::MAX;
+
+/// The `spins` the output stage passes to [`Facade::pause`] while the workers wait or are
+/// about to wait for it (the epoch's end is near, or GVT nears the undelivered frames'
+/// cap): a short sleep (50 µs with `StdFacade`), as the finisher's.
+const OUTPUT_PAUSE_URGENT: u32 = 64;
 
 /// [`run_threaded_with`](super::run_threaded_with) with scripted inputs, and a sink that also
 /// gets a [`RunControl`] to schedule inputs during the run (checked against GVT at that
@@ -343,7 +352,11 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
     while shared.status() == RunStatus::Running {
         let batch = std::mem::take(&mut *shared.finished.lock());
         if batch.is_empty() {
-            F::pause(OUTPUT_PAUSE);
+            F::pause(if shared.output_is_awaited() {
+                OUTPUT_PAUSE_URGENT
+            } else {
+                OUTPUT_PAUSE
+            });
         } else {
             deliver(batch);
         }
