@@ -11,7 +11,10 @@
 //! GVT and idle time, and checks every committed hash against the reference's.
 //!
 //! It also times rapier3d (built with `parallel`) on the same bodies on 1 and `TH_THREADS`
-//! rayon threads (`TH_RAPIER=0` skips it). Wall times on a shared 2-core machine are noisy: compare within one run
+//! rayon threads (`TH_RAPIER=0` skips it). And in each repetition it measures this host's
+//! ceiling (`TH_CEILING=0` skips it): `TH_THREADS` whole reference runs at once, one per
+//! thread, sharing nothing; their throughput over one run's is what two threads can give
+//! here at best, which on a shared host is less than the thread count. Wall times on a shared 2-core machine are noisy: compare within one run
 //! only.
 //!
 //! Every run uses the `soda` binary's allocator and its settings (`MIMALLOC_PURGE_DELAY=1000`
@@ -122,10 +125,31 @@ fn main() {
     // Each repetition times the reference again, then every case: the speed-up of a case is
     // the median over repetitions of (reference time / case time) measured side by side.
     let mut ratios: Vec<Vec<f64>> = vec![Vec::new(); cases.len()];
+    let mut ceilings: Vec<f64> = Vec::new();
+    let ceiling = env("TH_CEILING", "1", "1") != "0";
     for rep in 0..reps {
         let tr = if rep == 0 { tr } else { run_reference().1 };
         if rep > 0 {
             println!("  rep {}: reference {tr:.2} s", rep + 1);
+        }
+        if ceiling {
+            // What this host gives two threads that share nothing: `threads` whole
+            // reference runs at once, each on its own thread. Their throughput over one
+            // reference run's is the speed-up no executor can beat here (`threads` on an
+            // idle host with a core per thread; less when the host's other guests take
+            // their share, or when the cores share caches).
+            let t = Instant::now();
+            std::thread::scope(|s| {
+                for _ in 0..threads {
+                    s.spawn(|| assert_eq!(run_reference().0, expected));
+                }
+            });
+            let together = t.elapsed().as_secs_f64();
+            let c = threads as f64 * tr / together;
+            ceilings.push(c);
+            println!(
+                "  ceiling: {threads} reference runs side by side on {threads} threads took {together:.2} s = {c:.2}x one run's throughput"
+            );
         }
         for (k, &(w, window, lead, ahead)) in cases.iter().enumerate() {
             let config = KernelConfig::new(w).mode(RollbackMode::Cell).window(window);
@@ -162,6 +186,18 @@ fn main() {
         }
     }
     if reps > 1 {
+        if ceiling {
+            let mut c = ceilings.clone();
+            c.sort_by(f64::total_cmp);
+            println!(
+                "  median ceiling of {reps}: {:.2}x (runs: {})",
+                c[c.len() / 2],
+                c.iter()
+                    .map(|x| format!("{x:.2}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
         for (k, &(w, window, lead, ahead)) in cases.iter().enumerate() {
             let mut r = ratios[k].clone();
             r.sort_by(f64::total_cmp);
