@@ -649,3 +649,35 @@ fn more_worlds_than_cells_is_run_with_a_warning_naming_the_grid() {
     let out = with_worlds("8");
     assert!(!stderr(&out).contains("own no cell"), "{}", stderr(&out));
 }
+
+#[test]
+fn more_worlds_than_cells_warns_for_a_registered_model_too() {
+    // phold with 10 jobs at 4 per cell has a 1 x 1 x 4 grid: 4 cells.
+    let with_worlds = |worlds: &str| {
+        soda(&[
+            "run",
+            "--model",
+            "phold",
+            "--entities",
+            "10",
+            "--steps",
+            "2",
+            "--executor",
+            "virtual",
+            "--worlds",
+            worlds,
+        ])
+    };
+    let out = with_worlds("6");
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains("6 worlds on a grid of 4 cells")
+            && err.contains("2 of them own no cell")
+            && err.contains("--worlds 4 or fewer")
+            && !err.contains("solver.max_speed"),
+        "{err}"
+    );
+    let out = with_worlds("4");
+    assert!(!stderr(&out).contains("own no cell"), "{}", stderr(&out));
+}

@@ -8,13 +8,13 @@
 //! frees lazily, so the allocating thread keeps taking fresh pages while the freed ones sit
 //! idle, and with its default purge delay (1 s) it returns them to the OS and soon faults
 //! them back in, each one zeroed by the kernel. On 8,000 falling cubes on two threads that
-//! was 2,717 page faults in 600 steps against 300 with purging off, and the kernel's page
-//! zeroing alone was 2.9 % of the run's CPU samples (docs/performance.md, "Round nine").
-//! The reference executor, one thread, faults 280 times either way.
+//! was 2,717 page faults in 600 steps against 296 with purging off (docs/performance.md,
+//! "Round nine"). The reference executor, one thread, faults 278 times.
 //!
 //! The price is resident memory: memory freed stays mapped for reuse, so a run's resident
 //! set stays at its peak (which is what a simulation that keeps stepping needs again).
-//! `MIMALLOC_PURGE_DELAY` in the environment still decides, if set.
+//! `MIMALLOC_PURGE_DELAY` (or its old name `MIMALLOC_RESET_DELAY`, in any case, as mimalloc
+//! reads them) in the environment still decides, if set.
 //!
 //! ```
 //! // First thing in `main`, before any thread starts:
@@ -29,23 +29,37 @@ use libmimalloc_sys::{mi_option_set, mi_option_t};
 /// mimalloc itself prints.
 const PURGE_DELAY: mi_option_t = 15;
 
-/// The environment variable mimalloc reads for [`PURGE_DELAY`]; if set it wins.
-const PURGE_DELAY_VARIABLE: &str = "MIMALLOC_PURGE_DELAY";
+/// The environment variables mimalloc reads for [`PURGE_DELAY`] (the second is its old
+/// name; mimalloc ignores their case); if one is set it wins.
+const PURGE_DELAY_VARIABLES: [&str; 2] = ["MIMALLOC_PURGE_DELAY", "MIMALLOC_RESET_DELAY"];
+
+/// Whether the environment sets mimalloc's purge delay (mimalloc then read it when the
+/// process started).
+fn purge_delay_in_environment() -> bool {
+    std::env::vars_os().any(|(name, _)| {
+        let name = name.to_string_lossy();
+        PURGE_DELAY_VARIABLES
+            .iter()
+            .any(|v| name.eq_ignore_ascii_case(v))
+    })
+}
 
 /// Tells mimalloc never to return freed memory to the OS (unless `MIMALLOC_PURGE_DELAY`
 /// says otherwise). Call it first thing in `main`, before any other thread starts; it does
 /// nothing harmful if mimalloc is not the global allocator (its options then govern no
 /// allocation). [`main_with`](super::main_with) calls it.
 pub fn configure() {
-    if std::env::var_os(PURGE_DELAY_VARIABLE).is_some() {
+    if purge_delay_in_environment() {
         return;
     }
-    // SAFETY: `mi_option_set` takes two integers and writes one entry of mimalloc's static
-    // option table; it reads or writes no memory of ours. mimalloc documents the option
-    // functions as not thread safe: the only race is with another thread setting or first
-    // reading an option at the same moment, and a lost or torn write would leave a valid
-    // `long` (the default or ours), which only changes when memory is returned to the OS.
-    // `configure` is documented to run first in `main`, before any thread starts.
+    // SAFETY: `mi_option_set` takes two integers and stores one into an entry of
+    // mimalloc's static option table (a `long` and its "initialised" flag, options.c); it
+    // reads or writes no memory of ours, and the index is in range (the test below checks
+    // it names `purge_delay`). mimalloc's allocation paths read that entry without a lock
+    // (`mi_option_get`), so a write racing with a read on another thread is the only
+    // hazard; `configure` is to be called first in `main`, before any other thread
+    // exists, where no race is possible. Called later, the read sees the old or the new
+    // value, either a valid delay that only decides when freed memory goes back to the OS.
     unsafe { mi_option_set(PURGE_DELAY, -1) };
 }
 
@@ -72,7 +86,7 @@ mod tests {
 
     #[test]
     fn configure_turns_off_mimallocs_purge_delay_by_its_own_name() {
-        if std::env::var_os(PURGE_DELAY_VARIABLE).is_some() {
+        if purge_delay_in_environment() {
             // The environment decides; `configure` rightly leaves it alone.
             return;
         }

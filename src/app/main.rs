@@ -413,6 +413,35 @@ pub fn check_executor_options(
     Ok(())
 }
 
+/// The warning for a Time Warp run of `options` with more worlds than `grid` has cells, or
+/// `None`. Such a run is valid (a world may own no cell) but leaves worlds with nothing to
+/// do. `advice` (may be empty) ends it: how this model gets more, smaller cells.
+pub fn worlds_beyond_cells_warning(
+    options: &RunOptions,
+    grid: &crate::grid::Grid,
+    advice: &str,
+) -> Option<String> {
+    let cells = grid.cell_count();
+    let worlds = options.kernel.worlds;
+    if options.executor == ExecutorKind::Reference || worlds <= cells {
+        return None;
+    }
+    let [x, y, z] = grid.dims;
+    let advice = if advice.is_empty() {
+        String::new()
+    } else {
+        format!(" ({advice})")
+    };
+    Some(format!(
+        "warning: {worlds} worlds on a grid of {cells} cell{} ({x} x {y} x {z}, edge {:.4}): at \
+         least {} of them own no cell and have nothing to do; give --worlds {cells} or \
+         fewer{advice}",
+        if cells == 1 { "" } else { "s" },
+        grid.edge,
+        worlds - cells,
+    ))
+}
+
 /// Refuses `--partition-seed` (`seed_given`) with a partitioner that has nothing random.
 pub fn check_partition_seed(partition: &PartitionKind, seed_given: bool) -> Result<()> {
     if seed_given && !partition.is_seeded() {

@@ -30,6 +30,6 @@ mod registry;
 
 pub use main::{
     check_checkpoint_has_a_step, check_executor_options, check_partition_seed, main_with, run_with,
-    ModelCli,
+    worlds_beyond_cells_warning, ModelCli,
 };
 pub use registry::{ModelSize, RegisteredModel, Registry};

@@ -152,6 +152,13 @@ where
             ),
         };
         let (model, grid, mut initial) = (self.build)(size);
+        let advice = "the grid is the one the model's builder makes: a smaller cell edge gives \
+                      more cells";
+        if let Some(warning) = super::worlds_beyond_cells_warning(options, &grid, advice) {
+            if prints_here(options) {
+                eprintln!("{warning}");
+            }
+        }
         let mut origin = 0;
         if let (Some(c), Some(codec)) = (from, codec) {
             initial = (codec.read)(c)?;
@@ -207,6 +214,22 @@ where
             });
         }
         Ok((report, written))
+    }
+}
+
+/// Whether this process prints a run's warnings: every process but the ranks other than 0
+/// of an MPI run whose session is open.
+fn prints_here(options: &RunOptions) -> bool {
+    if options.executor != crate::sim::ExecutorKind::Mpi {
+        return true;
+    }
+    #[cfg(feature = "mpi")]
+    {
+        crate::exec::mpi::Session::open_rank().is_none_or(|rank| rank == 0)
+    }
+    #[cfg(not(feature = "mpi"))]
+    {
+        true
     }
 }
 

@@ -358,21 +358,12 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
     let grid = scene.grid();
     // More worlds than cells is valid (a world may own no cell) but leaves worlds with
     // nothing to do: say so, and why the grid is this coarse.
-    let cells = grid.cell_count();
-    if options.executor != ExecutorKind::Reference && options.kernel.worlds > cells && role.root() {
-        eprintln!(
-            "warning: {} worlds on a grid of {cells} cell{} ({} x {} x {}, edge {:.4} m): at \
-             least {} of them own no cell and have nothing to do; give --worlds {cells} or \
-             fewer (the cell edge follows the largest body and solver.max_speed x dt: a \
-             smaller solver.max_speed gives more, smaller cells)",
-            options.kernel.worlds,
-            if cells == 1 { "" } else { "s" },
-            grid.dims[0],
-            grid.dims[1],
-            grid.dims[2],
-            grid.edge,
-            options.kernel.worlds - cells,
-        );
+    let advice = "the cell edge, in metres, follows the largest body and solver.max_speed x dt: \
+                  a smaller solver.max_speed gives more, smaller cells";
+    if let Some(warning) = soda::app::worlds_beyond_cells_warning(&options, &grid, advice) {
+        if role.root() {
+            eprintln!("{warning}");
+        }
     }
     // The bodies at the first step: the scene's inside the grid, or the checkpoint's.
     let mut initial: Vec<Body> = match &from {

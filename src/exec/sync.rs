@@ -53,7 +53,7 @@ pub trait Facade: Send + Sync + 'static {
     fn join(h: Self::Handle) -> Result<(), ThreadPanicked>;
     /// Gives the processor to another thread; `spins` counts consecutive idle calls so an
     /// implementation may back off (`u32::MAX`: a poller nobody waits for, which may sleep
-    /// longest).
+    /// longest; [`SOON_POLL_SPINS`]: one that others will wait for soon).
     fn pause(spins: u32);
     /// Makes the calling thread yield the processor to the others whenever they want it
     /// (the threaded executor's frame finisher: work that may wait, beside workers that
@@ -122,11 +122,20 @@ impl Facade for StdFacade {
     fn pause(spins: u32) {
         match spins {
             0..64 => std::thread::yield_now(),
-            u32::MAX => std::thread::sleep(std::time::Duration::from_micros(2000)),
+            u32::MAX => std::thread::sleep(SLOW_POLL),
+            SOON_POLL_SPINS => std::thread::sleep(SLOW_POLL / 4),
             _ => std::thread::sleep(std::time::Duration::from_micros(50)),
         }
     }
 }
+
+/// How long [`StdFacade`] sleeps for `spins == u32::MAX`: the pace of a poller nobody
+/// waits for (the threaded executor's output stage between frames).
+pub const SLOW_POLL: std::time::Duration = std::time::Duration::from_millis(2);
+
+/// The `spins` of a poller that others will wait for soon, but not yet: [`StdFacade`]
+/// sleeps a quarter of [`SLOW_POLL`].
+pub const SOON_POLL_SPINS: u32 = u32::MAX - 1;
 
 /// The nice value [`lower_this_threads_priority`] gives a thread: the lowest priority.
 pub const BACKGROUND_NICE: i32 = 19;

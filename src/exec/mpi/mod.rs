@@ -87,6 +87,15 @@ impl Session {
         })
     }
 
+    /// This process's rank if a session is open in it (`None`: no session, and none is
+    /// started, so no MPI call is made).
+    pub fn open_rank() -> Option<usize> {
+        let universe = UNIVERSE.lock().unwrap_or_else(|e| e.into_inner());
+        universe
+            .as_ref()
+            .map(|_| SimpleCommunicator::world().rank() as usize)
+    }
+
     /// This process's rank (0 writes the run's outputs).
     pub fn rank(&self) -> usize {
         self.rank

@@ -11,7 +11,7 @@ use crate::exec::error::ExecError;
 use crate::exec::live::{LiveStatus, WorldStatus};
 use crate::exec::load::LoadMeter;
 use crate::exec::schedule::Schedule;
-use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
+use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex, SLOW_POLL, SOON_POLL_SPINS};
 use crate::frame::Frame;
 use crate::kernel::balance::{imbalance, Balancer};
 use crate::kernel::counters::Counters;
@@ -24,16 +24,26 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// The `spins` the output stage passes to [`Facade::pause`] while nobody waits for it: it
-/// polls at a slow pace (2 ms with [`StdFacade`](crate::exec::sync::StdFacade)). Each poll
+/// polls at a slow pace ([`SLOW_POLL`] with [`StdFacade`](crate::exec::sync::StdFacade)). Each poll
 /// wakes the calling thread, which on a machine with a core per worker takes a worker's core
 /// for a moment: at 0.5 ms that was a third of the threaded run's context switches on
 /// 8,000 cubes (docs/performance.md, "Round nine").
 const OUTPUT_PAUSE: u32 = u32::MAX;
 
+/// The `spins` the output stage passes to [`Facade::pause`] while the workers will wait
+/// for it within two slow polls but not within half of one ([`SOON_POLL_SPINS`]: a
+/// quarter of a slow poll with `StdFacade`).
+const OUTPUT_PAUSE_SOON: u32 = SOON_POLL_SPINS;
+
 /// The `spins` the output stage passes to [`Facade::pause`] while the workers wait or are
-/// about to wait for it (the epoch's end is near, or GVT nears the undelivered frames'
-/// cap): a short sleep (50 µs with `StdFacade`), as the finisher's.
+/// about to wait for it (the epoch's end or the undelivered frames' cap is within half a
+/// slow poll's steps, or [`AWAITED_STEPS`]): a short sleep (50 µs with `StdFacade`), as
+/// the finisher's.
 const OUTPUT_PAUSE_URGENT: u32 = 64;
+
+/// Within this many steps of the epoch's end or the undelivered cap, the output stage
+/// polls fast whatever the pace: when the epoch ends every worker idles until it notices.
+const AWAITED_STEPS: Step = 2;
 
 /// [`run_threaded_with`](super::run_threaded_with) with scripted inputs, and a sink that also
 /// gets a [`RunControl`] to schedule inputs during the run (checked against GVT at that
@@ -197,11 +207,13 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         }
     };
     let mut busy_total = vec![0.0f64; n];
+    // The steps' pace, measured across epochs (an epoch may be shorter than a slow poll).
+    let mut pace = Pace::new(shared.committed.load());
     let mut last_round: Step = 0;
     // The epochs; however they end, the finisher is then stopped and joined.
     let mut epochs = || -> Result<(), ExecError> {
         loop {
-            run_epoch(&shared, threads, &mut deliver)?;
+            run_epoch(&shared, threads, &mut pace, &mut deliver)?;
             let committed = shared.committed.load();
             if committed >= steps || steps == 0 || shared.stop.load() == 1 {
                 break;
@@ -315,6 +327,40 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     })
 }
 
+/// How fast steps are committed, as the output stage sees it: how many one slow poll
+/// ([`SLOW_POLL`]) lets through, so it polls fast early enough when steps are quick.
+struct Pace {
+    /// When it last measured.
+    at: Instant,
+    /// The last committed step then.
+    committed: Step,
+    /// Steps committed per slow poll, at the last measurement ([`Step::MAX`] before one:
+    /// until the pace is known the output stage polls fast).
+    per_poll: Step,
+}
+
+impl Pace {
+    fn new(committed: Step) -> Self {
+        Pace {
+            at: Instant::now(),
+            committed,
+            per_poll: Step::MAX,
+        }
+    }
+
+    /// Measures again once at least a slow poll's time has passed since the last time.
+    fn observe(&mut self, committed: Step) {
+        let elapsed = self.at.elapsed();
+        if elapsed < SLOW_POLL {
+            return;
+        }
+        let steps = committed.saturating_sub(self.committed) as f64;
+        self.per_poll = (steps * SLOW_POLL.as_secs_f64() / elapsed.as_secs_f64()).ceil() as Step;
+        self.at = Instant::now();
+        self.committed = committed;
+    }
+}
+
 /// Tells the finisher that no more committed steps will come when the calling thread
 /// leaves the run, however it leaves it: if a sink panics, the run is also stopped, so
 /// neither the workers nor the finisher go on without it.
@@ -335,6 +381,7 @@ impl<M: CellModel + 'static, F: Facade> Drop for Closing<'_, M, F> {
 fn run_epoch<M: CellModel + 'static, F: Facade>(
     shared: &Arc<SharedRun<M, F>>,
     threads: usize,
+    pace: &mut Pace,
     deliver: &mut impl FnMut(VecDeque<FinishedFrame<M>>),
 ) -> Result<(), ExecError> {
     // Tasks left from an earlier epoch are stale: every world is queued once again.
@@ -352,8 +399,12 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
     while shared.status() == RunStatus::Running {
         let batch = std::mem::take(&mut *shared.finished.lock());
         if batch.is_empty() {
-            F::pause(if shared.output_is_awaited() {
+            pace.observe(shared.committed.load());
+            let left = shared.steps_before_output_is_awaited();
+            F::pause(if left <= AWAITED_STEPS || left <= pace.per_poll / 2 {
                 OUTPUT_PAUSE_URGENT
+            } else if left <= pace.per_poll.saturating_mul(2) {
+                OUTPUT_PAUSE_SOON
             } else {
                 OUTPUT_PAUSE
             });

@@ -46,10 +46,6 @@ impl RunStatus {
 /// sink must slow the run, not grow it (SPEC.md §K7).
 pub(super) const UNDELIVERED_WINDOWS: Step = 4;
 
-/// How close to the epoch's last step (in steps) the output stage polls fast: when the
-/// epoch ends every worker idles until the output stage notices.
-const EPOCH_END_NEAR: Step = 2;
-
 /// The state of a threaded run that the worker threads, the finisher and the output stage
 /// share.
 pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
@@ -162,14 +158,15 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         self.status.store(status as u64);
     }
 
-    /// Whether the workers wait, or soon will, for the output stage (the calling thread): the
-    /// epoch's last step is near (the epoch ends when the output stage notices), or GVT has
-    /// used seven eighths of its lead over the last frame delivered (at the cap it stops).
-    pub(super) fn output_is_awaited(&self) -> bool {
-        let epoch_end_near = self.committed.load() + EPOCH_END_NEAR >= self.target.load();
+    /// How many steps the workers can commit before they wait for the output stage (the
+    /// calling thread): to the epoch's last step (the epoch ends when the output stage
+    /// notices), or to the cap of GVT's lead over the last frame delivered (at the cap GVT
+    /// stops), whichever comes first.
+    pub(super) fn steps_before_output_is_awaited(&self) -> Step {
+        let to_epoch_end = self.target.load().saturating_sub(self.committed.load());
         let cap = self.delivered.load() + 1 + self.undelivered;
-        let cap_near = self.gvt.load() + self.undelivered / 8 >= cap;
-        epoch_end_near || cap_near
+        let to_cap = cap.saturating_sub(self.gvt.load());
+        to_epoch_end.min(to_cap)
     }
 
     /// Queues world `w` in the ready set unless it is already queued or taken. A waiting
