@@ -621,22 +621,18 @@ fn a_checkpoint_of_a_run_without_steps_is_refused_before_the_run() {
     assert!(!ckpt.exists());
 }
 
+/// A two-step `virtual` run of `soda run ARGS --worlds WORLDS`.
+fn virtual_run_with_worlds(args: &[&str], worlds: &str) -> std::process::Output {
+    let mut all = vec!["run"];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--steps", "2", "--executor", "virtual", "--worlds", worlds]);
+    soda(&all)
+}
+
 #[test]
 fn more_worlds_than_cells_is_run_with_a_warning_naming_the_grid() {
     // falling-cubes with 27 cubes has a 9 x 4 x 9 grid: 324 cells.
-    let with_worlds = |worlds: &str| {
-        soda(&[
-            "run",
-            "--objects",
-            "27",
-            "--steps",
-            "2",
-            "--executor",
-            "virtual",
-            "--worlds",
-            worlds,
-        ])
-    };
+    let with_worlds = |worlds| virtual_run_with_worlds(&["--objects", "27"], worlds);
     let out = with_worlds("500");
     assert!(out.status.success(), "{}", stderr(&out));
     let err = stderr(&out);
@@ -653,21 +649,8 @@ fn more_worlds_than_cells_is_run_with_a_warning_naming_the_grid() {
 #[test]
 fn more_worlds_than_cells_warns_for_a_registered_model_too() {
     // phold with 10 jobs at 4 per cell has a 1 x 1 x 4 grid: 4 cells.
-    let with_worlds = |worlds: &str| {
-        soda(&[
-            "run",
-            "--model",
-            "phold",
-            "--entities",
-            "10",
-            "--steps",
-            "2",
-            "--executor",
-            "virtual",
-            "--worlds",
-            worlds,
-        ])
-    };
+    let with_worlds =
+        |worlds| virtual_run_with_worlds(&["--model", "phold", "--entities", "10"], worlds);
     let out = with_worlds("6");
     assert!(out.status.success(), "{}", stderr(&out));
     let err = stderr(&out);

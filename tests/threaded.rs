@@ -105,28 +105,38 @@ fn repeated_threaded_runs_in_every_mode_match_the_reference() {
     }
 }
 
+/// A planted body: id, position, the steps it has lived, and the count at which its hash
+/// panics (0: never).
+type PlantedBody = (BodyId, [f32; 3], u32, u32);
+
 /// The grid and bodies of the planted-panic tests: an 8 m cube of 1 m cells and 64 bodies,
-/// one per cell of its bottom layer (id, position).
-fn planted_lattice() -> (Grid, Vec<(BodyId, [f32; 3])>) {
+/// one per cell of its bottom layer, whose hash panics once they have lived
+/// `unhashable_at` steps (0: never).
+fn planted_lattice(unhashable_at: u32) -> (Grid, Vec<PlantedBody>) {
     let grid = Grid::covering(
         soda::math::Vec3::zeros(),
         soda::math::Vec3::new(8.0, 8.0, 8.0),
         1.0,
     );
     let bodies = (0..64)
-        .map(|i| (i, [0.5 + (i % 8) as f32, 0.5 + (i / 8) as f32, 0.5]))
+        .map(|i| {
+            let at = [0.5 + (i % 8) as f32, 0.5 + (i / 8) as f32, 0.5];
+            (i, at, 0, unhashable_at)
+        })
         .collect();
     (grid, bodies)
 }
 
-/// A synthetic model whose step panics at a chosen step (the test-only hook).
+/// A synthetic model with planted panics (the test-only hooks): its step panics at
+/// `step_panics_at`, and hashing a body panics at the count the body carries (the frame
+/// finisher, not a world, meets that one; `hash_state` has no `self`).
 #[derive(Clone)]
-struct PanicAt {
-    step: Step,
+struct Planted {
+    step_panics_at: Option<Step>,
 }
 
-impl CellModel for PanicAt {
-    type State = (BodyId, [f32; 3]);
+impl CellModel for Planted {
+    type State = PlantedBody;
     type Event = soda::LeftGrid;
     fn id(s: &Self::State) -> BodyId {
         s.0
@@ -142,56 +152,23 @@ impl CellModel for PanicAt {
         out: &mut Vec<Self::State>,
         _events: &mut Vec<Event<soda::LeftGrid>>,
     ) {
-        if step == self.step {
+        if Some(step) == self.step_panics_at {
             panic!("planted panic at step {step}");
         }
-        out.extend(nb.own().iter().copied());
+        out.extend(nb.own().iter().map(|&(id, p, n, bad)| (id, p, n + 1, bad)));
     }
     fn hash_state(s: &Self::State, h: &mut StateHash) {
-        for c in s.1 {
-            h.f32(c);
-        }
-    }
-}
-
-/// A synthetic model whose states count the steps, and whose hash panics on a state of a
-/// chosen step: the frame finisher, not a world, meets the panic.
-#[derive(Clone)]
-struct HashPanicsAt;
-
-/// The step whose states [`HashPanicsAt`] cannot hash.
-const UNHASHABLE_STEP: u32 = 5;
-
-impl CellModel for HashPanicsAt {
-    type State = (BodyId, [f32; 3], u32);
-    type Event = soda::LeftGrid;
-    fn id(s: &Self::State) -> BodyId {
-        s.0
-    }
-    fn position(s: &Self::State) -> [f32; 3] {
-        s.1
-    }
-    fn step_cell(
-        &self,
-        _step: Step,
-        _grid: &Grid,
-        nb: &Neighbourhood<'_, Self::State>,
-        out: &mut Vec<Self::State>,
-        _events: &mut Vec<Event<soda::LeftGrid>>,
-    ) {
-        out.extend(nb.own().iter().map(|&(id, p, n)| (id, p, n + 1)));
-    }
-    fn hash_state(s: &Self::State, h: &mut StateHash) {
-        assert!(s.2 != UNHASHABLE_STEP, "planted hash panic");
+        assert!(s.3 == 0 || s.2 != s.3, "planted hash panic");
         h.u32(s.2);
     }
 }
 
+/// The step whose states the hash test cannot hash.
+const UNHASHABLE_STEP: u32 = 5;
+
 #[test]
 fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
-    let (grid, places) = planted_lattice();
-    let bodies: Vec<(BodyId, [f32; 3], u32)> =
-        places.into_iter().map(|(id, p)| (id, p, 0)).collect();
+    let (grid, bodies) = planted_lattice(UNHASHABLE_STEP);
     // With balancing every 5 steps the panic meets the end of an epoch: the failure must
     // not be lost when the next epoch starts.
     let balancing = soda::kernel::BalanceConfig {
@@ -205,7 +182,9 @@ fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
             KernelConfig::new(2).window(8).balance(balancing.clone()),
         ] {
             let err = run_threaded(
-                HashPanicsAt,
+                Planted {
+                    step_panics_at: None,
+                },
                 grid.clone(),
                 bodies.clone(),
                 &config,
@@ -223,11 +202,13 @@ fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
 
 #[test]
 fn a_panicking_world_ends_the_run_with_an_error_naming_world_and_step() {
-    let (grid, bodies) = planted_lattice();
+    let (grid, bodies) = planted_lattice(0);
     for threads in [1, 2, 4] {
         let config = KernelConfig::new(4).window(8);
         let err = run_threaded(
-            PanicAt { step: 5 },
+            Planted {
+                step_panics_at: Some(5),
+            },
             grid.clone(),
             bodies.clone(),
             &config,
