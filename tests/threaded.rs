@@ -128,8 +128,8 @@ fn planted_lattice(unhashable_at: u32) -> (Grid, Vec<PlantedBody>) {
 }
 
 /// A synthetic model with planted panics (the test-only hooks): its step panics at
-/// `step_panics_at`, and hashing a body panics at the count the body carries (the frame
-/// finisher, not a world, meets that one; `hash_state` has no `self`).
+/// `step_panics_at`, and hashing a body panics at the count the body carries (met while a
+/// committed frame is finished, not in a world's step; `hash_state` has no `self`).
 #[derive(Clone)]
 struct Planted {
     step_panics_at: Option<Step>,
@@ -194,7 +194,10 @@ fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
             .unwrap_err();
             let text = err.to_string();
             assert!(matches!(err, ExecError::Thread(_)), "{text}");
-            assert!(text.contains("frame finisher panicked at step 5"), "{text}");
+            assert!(
+                text.contains("finishing the frame of step 5 panicked"),
+                "{text}"
+            );
             assert!(text.contains("planted hash panic"), "{text}");
         }
     }

@@ -3,8 +3,9 @@
 //! memory it frees instead of handing it back to the OS after a second.
 //!
 //! Why: in a threaded run a state is allocated by the worker that computes it and often
-//! freed by another thread (the frame finisher drops the last reference of a committed
-//! step, fossil collection runs wherever its world runs next). mimalloc collects those
+//! freed by another thread (the worker finishing a committed frame drops the last
+//! reference of another world's states, fossil collection runs wherever its world runs
+//! next). mimalloc collects those
 //! frees lazily, so the allocating thread keeps taking fresh pages while the freed ones sit
 //! idle, and with its default purge delay (1 s) it returns them to the OS and soon faults
 //! them back in, each one zeroed by the kernel. On 8,000 falling cubes on two threads that

@@ -43,8 +43,8 @@ pub enum ExecError {
         /// GVT at the stall.
         gvt: Step,
     },
-    /// A thread of the executor died outside a world's step (a worker, or the threaded
-    /// executor's frame finisher, whose message names the step it was finishing).
+    /// A thread of the executor failed outside a world's step (a worker died, or a
+    /// committed frame's hashing panicked: the message names the step).
     #[error("an executor thread failed: {0}")]
     Thread(#[from] ThreadPanicked),
     /// The MPI executor cannot run this (SPEC.md §14).

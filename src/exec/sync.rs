@@ -55,10 +55,6 @@ pub trait Facade: Send + Sync + 'static {
     /// implementation may back off (`u32::MAX`: a poller nobody waits for, which may sleep
     /// longest; [`SOON_POLL_SPINS`]: one that others will wait for soon).
     fn pause(spins: u32);
-    /// Makes the calling thread yield the processor to the others whenever they want it
-    /// (the threaded executor's frame finisher: work that may wait, beside workers that
-    /// wait for each other). A hint only; by default nothing.
-    fn run_in_background() {}
 }
 
 /// The standard library's primitives.
@@ -115,10 +111,6 @@ impl Facade for StdFacade {
         h.join().map_err(|e| ThreadPanicked(panic_message(&*e)))
     }
 
-    fn run_in_background() {
-        lower_this_threads_priority();
-    }
-
     fn pause(spins: u32) {
         match spins {
             0..64 => std::thread::yield_now(),
@@ -137,32 +129,6 @@ pub const SLOW_POLL: std::time::Duration = std::time::Duration::from_millis(2);
 /// sleeps a quarter of [`SLOW_POLL`].
 pub const SOON_POLL_SPINS: u32 = u32::MAX - 1;
 
-/// The nice value [`lower_this_threads_priority`] gives a thread: the lowest priority.
-pub const BACKGROUND_NICE: i32 = 19;
-
-/// Gives the calling thread the lowest scheduling priority ([`BACKGROUND_NICE`]) on Linux,
-/// where a thread has its own nice value: the scheduler then runs it mostly when the
-/// other threads leave a core free. Elsewhere (where the call would lower the whole
-/// process) it does nothing. Returns whether the priority was lowered.
-pub fn lower_this_threads_priority() -> bool {
-    #[cfg(target_os = "linux")]
-    {
-        // SAFETY: `gettid` takes no argument and only returns the caller's thread id;
-        // `setpriority` takes three integers and changes that thread's nice value (Linux
-        // applies `PRIO_PROCESS` to the one thread a thread id names). Neither touches
-        // memory of this program; a failure (e.g. a sandbox forbidding it) is reported
-        // through the return value and leaves the priority as it was.
-        unsafe {
-            let tid = libc::gettid();
-            libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, BACKGROUND_NICE) == 0
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    {
-        false
-    }
-}
-
 /// The text of a panic payload.
 pub fn panic_message(e: &(dyn std::any::Any + Send)) -> String {
     if let Some(s) = e.downcast_ref::<&str>() {
@@ -171,38 +137,5 @@ pub fn panic_message(e: &(dyn std::any::Any + Send)) -> String {
         s.clone()
     } else {
         "non-string panic payload".to_string()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    #[cfg(target_os = "linux")]
-    fn nice_of_this_thread() -> i32 {
-        // SAFETY: `gettid` and `getpriority` take integers and return one; no memory of this
-        // program is touched.
-        unsafe { libc::getpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t) }
-    }
-
-    #[cfg(target_os = "linux")]
-    #[test]
-    fn a_background_thread_gets_the_lowest_priority_and_no_other_thread_does() {
-        let before = nice_of_this_thread();
-        let (lowered, nice) = std::thread::spawn(|| {
-            let lowered = super::lower_this_threads_priority();
-            (lowered, nice_of_this_thread())
-        })
-        .join()
-        .expect("the thread runs");
-        if lowered {
-            assert_eq!(nice, super::BACKGROUND_NICE);
-        } else {
-            // A sandbox may forbid it: then nothing changed.
-            assert_eq!(nice, before, "a refused call leaves the priority as it was");
-        }
-        assert_eq!(
-            nice_of_this_thread(),
-            before,
-            "only the calling thread changed"
-        );
     }
 }

@@ -17,7 +17,7 @@
 //! did not change meanwhile, so it never misses a message in transit between two of them.
 //! After GVT advances, each world hands its states of the new committed steps to a frame
 //! assembly on its next turn and fossil-collects; a frame is finished (all worlds merged,
-//! sorted, hashed — by the finisher thread at the lowest priority) only once every world
+//! sorted, hashed — by one worker at a time, between its turns) only once every world
 //! has contributed, and queued in step order for the output stage on the calling thread. A frame is never torn or speculative.
 //!
 //! This is the only module that starts threads, and it does so through [`Facade`].

@@ -1,7 +1,7 @@
 //! Committed frames: each world hands its states of the steps below GVT to the frame
-//! assembly; a step every world contributed is queued whole, in step order, for the
-//! finisher thread, which sorts and hashes it; the output stage (the calling thread) hands
-//! the finished frames to the sink.
+//! assembly; a step every world contributed is queued whole, in step order, and one worker
+//! at a time sorts and hashes the queued steps between its turns; the output stage (the
+//! calling thread) hands the finished frames to the sink.
 
 use super::report::ThreadTimes;
 use super::shared::{RunStatus, SharedRun, ThreadedWorld};
@@ -18,7 +18,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 pub(super) struct Assembly<M: CellModel> {
     /// The steps some worlds have contributed to, by step.
     pub(super) partial: BTreeMap<Step, Partial<M>>,
-    /// The next step to go to the finisher (when every world has contributed it).
+    /// The next step to be queued for finishing (when every world has contributed it).
     pub(super) next: Step,
 }
 
@@ -35,8 +35,8 @@ pub(super) struct Partial<M: CellModel> {
     pub(super) unchanged: bool,
 }
 
-/// Committed steps waiting for the finisher thread, whole (every world contributed) but not
-/// yet sorted and hashed: the finisher finishes the frames, off the workers' critical path.
+/// Committed steps waiting to be finished, whole (every world contributed) but not yet
+/// sorted and hashed ([`SharedRun::finish_pending`]).
 pub(super) struct Output<M: CellModel> {
     /// Whole committed steps, in step order.
     pub(super) pending: VecDeque<(Step, Partial<M>)>,
@@ -73,7 +73,7 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         // The cells' states are handed over as shared references, not copied: a copy of a
         // heavy world's ~1,000 states into fresh memory took ~3 ms now and then (page faults
         // on memory the allocator had returned), holding up the world and its neighbours.
-        // The finisher flattens them when it sorts and hashes the frame.
+        // They are flattened when the frame is sorted and hashed.
         let mut assembly = self.assembly.lock();
         for t in held.contributed + 1..=last {
             let part = assembly.partial.entry(t).or_insert_with(|| Partial {
@@ -106,8 +106,8 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         if done.is_empty() {
             return;
         }
-        // Whole steps are queued under the assembly lock, so they reach the finisher in step
-        // order whichever thread completes them; the finisher sorts and hashes.
+        // Whole steps are queued under the assembly lock, so they are finished in step order
+        // whichever thread completes them.
         let last_step = done.last().map_or(0, |d| d.0);
         self.out.lock().pending.extend(done);
         // Still under the assembly lock, so `committed` only grows: a thread that finished
@@ -121,7 +121,7 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
     }
 }
 
-/// A committed step the finisher sorted and hashed: its frame, and its states if the sink
+/// A committed step sorted and hashed: its frame, and its states if the sink
 /// asked for them.
 pub(super) struct FinishedFrame<M: CellModel> {
     /// The step.
@@ -132,40 +132,27 @@ pub(super) struct FinishedFrame<M: CellModel> {
     pub(super) states: Option<Vec<M::State>>,
 }
 
-/// The finisher's poll pace while nothing is pending (a short sleep: it is one stage of the
-/// path from a committed step to the sink, and the run waits for the sink).
-const FINISHER_PAUSE: u32 = 64;
-
 impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
-    /// The finisher thread: sorts and hashes each committed step as it comes (the work
-    /// the reference executor does at each step, [`finish_frame`]), at the lowest
-    /// priority, so it runs on the time the workers leave free instead of taking a
-    /// worker's core in the middle of a step its neighbour world waits for. Returns once
-    /// the run is `closing` and nothing is pending. Steps after the sink stopped the run,
-    /// or after it failed, are dropped unfinished.
-    pub(super) fn finisher_loop(&self, wanted: StatesWanted) {
-        F::run_in_background();
-        let mut last = None;
+    /// Finishes the committed steps pending, in step order (sorts and hashes each: the
+    /// work the reference executor does at each step, [`finish_frame`]), and queues their
+    /// frames for the output stage, unless another thread is finishing them now: that
+    /// thread looks at the queue again after it lets go, so a step queued meanwhile is
+    /// never left behind. A worker calls it after each turn of a world, without the
+    /// world's lock (SPEC.md §10). Steps after the sink stopped the run, or after it
+    /// failed, are dropped unfinished.
+    pub(super) fn finish_pending(&self) {
         loop {
-            // `closing` is read before the queue is taken: it is stored after the workers
-            // have returned, so once it reads 1 every step they queued is in this take.
-            let closing = self.closing.load() == 1;
-            let batch = std::mem::take(&mut self.out.lock().pending);
-            if batch.is_empty() {
-                if closing {
-                    return;
-                }
-                F::pause(FINISHER_PAUSE);
-                continue;
-            }
-            for (step, partial) in batch {
+            let Some(mut last) = self.finishing.try_lock() else {
+                return;
+            };
+            while let Some((step, partial)) = self.pop_pending() {
                 if self.stop.load() == 1 || self.status() == RunStatus::Failed {
                     continue;
                 }
                 // A model's hash panicking stops the run with an error instead of leaving
                 // the workers waiting for a sink that no frame reaches.
                 let finished = catch_unwind(AssertUnwindSafe(|| {
-                    finish_frame::<M>(step, partial, &wanted, &mut last)
+                    finish_frame::<M>(step, partial, &self.wanted, &mut last)
                 }));
                 match finished {
                     Ok((frame, states)) => self.finished.lock().push_back(FinishedFrame {
@@ -175,14 +162,25 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
                     }),
                     Err(p) => {
                         self.fail(ExecError::Thread(ThreadPanicked(format!(
-                            "the frame finisher panicked at step {step}: {}",
+                            "finishing the frame of step {step} panicked: {}",
                             panic_message(&*p)
                         ))));
                         return;
                     }
                 }
             }
+            drop(last);
+            // A step queued while this thread let go: its queuer found the lock taken and
+            // left the step to this thread.
+            if self.out.lock().pending.is_empty() {
+                return;
+            }
         }
+    }
+
+    /// The first committed step waiting to be finished, taken from the queue.
+    fn pop_pending(&self) -> Option<(Step, Partial<M>)> {
+        self.out.lock().pending.pop_front()
     }
 }
 

@@ -9,7 +9,8 @@ use crate::kernel::trace::RunTrace;
 /// nothing here reaches a hash).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct ThreadTimes {
-    /// Seconds inside world turns that computed something.
+    /// Seconds inside world turns that computed something, and finishing committed frames
+    /// (sorting and hashing them).
     pub busy_seconds: f64,
     /// Of the busy time, seconds in actions applying an inbox (message exchange).
     pub receive_seconds: f64,

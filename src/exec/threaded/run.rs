@@ -37,8 +37,7 @@ const OUTPUT_PAUSE_SOON: u32 = SOON_POLL_SPINS;
 
 /// The `spins` the output stage passes to [`Facade::pause`] while the workers wait or are
 /// about to wait for it (the epoch's end or the undelivered frames' cap is within half a
-/// slow poll's steps, or [`AWAITED_STEPS`]): a short sleep (50 µs with `StdFacade`), as
-/// the finisher's.
+/// slow poll's steps, or [`AWAITED_STEPS`]): a short sleep (50 µs with `StdFacade`).
 const OUTPUT_PAUSE_URGENT: u32 = 64;
 
 /// Within this many steps of the epoch's end or the undelivered cap, the output stage
@@ -146,7 +145,8 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         }),
         out: F::Mutex::new(Output::default()),
         finished: F::Mutex::new(VecDeque::new()),
-        closing: F::Atomic::new(0),
+        finishing: F::Mutex::new(None),
+        wanted: wanted.clone(),
         error: F::Mutex::new(None),
         inputs: F::Mutex::new(InputLog {
             count: 0,
@@ -164,13 +164,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     let mut frames = Vec::new();
     let mut delivered = 0u64;
     let mut stopped = false;
-    // The finisher sorts and hashes the committed steps for the whole run (all epochs).
-    let finisher = {
-        let shared = shared.clone();
-        let wanted = wanted.clone();
-        F::spawn(move || shared.finisher_loop(wanted))
-    };
-    let closing = Closing(&shared);
+    let stop_on_unwind = StopOnUnwind(&shared);
     let poster = shared.clone();
     let mut deliver = |batch: VecDeque<FinishedFrame<M>>| {
         for FinishedFrame {
@@ -210,7 +204,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     // The steps' pace, measured across epochs (an epoch may be shorter than a slow poll).
     let mut pace = Pace::new(shared.committed.load());
     let mut last_round: Step = 0;
-    // The epochs; however they end, the finisher is then stopped and joined.
+    // The epochs.
     let mut epochs = || -> Result<(), ExecError> {
         loop {
             run_epoch(&shared, threads, &mut pace, &mut deliver)?;
@@ -275,9 +269,8 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
             }
             drop(locked);
             shared.target.store(epoch_end);
-            // The finisher may have failed since the epoch ended (it runs behind): the
-            // restart is decided under the error lock, which `fail` holds while it marks
-            // the run failed, so a failure is never overwritten by `Running`.
+            // The restart is decided under the error lock, which `fail` holds while it
+            // marks the run failed, so a failure is never overwritten by `Running`.
             let error = shared.error.lock();
             if error.is_some() {
                 break;
@@ -288,21 +281,17 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         Ok(())
     };
     let epochs = epochs();
-    // No more committed steps: the finisher finishes what is pending and returns.
-    drop(closing);
-    let finisher = F::join(finisher);
+    drop(stop_on_unwind);
     epochs?;
-    finisher.map_err(ExecError::Thread)?;
-    // The finisher may have failed after the workers were done.
+    // Every worker has returned; whoever queued a step finished it or left it to the thread
+    // finishing then, which looked again before it let go. Nothing is pending but steps
+    // after the sink stopped the run, which are dropped unfinished.
+    shared.finish_pending();
     if let Some(e) = shared.error.lock().take() {
         return Err(e);
     }
     deliver(std::mem::take(&mut *shared.finished.lock()));
     let out = std::mem::take(&mut *shared.out.lock());
-    debug_assert!(
-        out.pending.is_empty() || shared.stop.load() == 1,
-        "the finisher finished every committed step"
-    );
     let mut locked: Vec<_> = shared.worlds.iter().map(|w| w.lock()).collect();
     for (w, s) in locked.iter_mut().enumerate() {
         busy_total[w] += s.meter.busy_seconds();
@@ -361,18 +350,16 @@ impl Pace {
     }
 }
 
-/// Tells the finisher that no more committed steps will come when the calling thread
-/// leaves the run, however it leaves it: if a sink panics, the run is also stopped, so
-/// neither the workers nor the finisher go on without it.
-struct Closing<'a, M: CellModel + 'static, F: Facade>(&'a SharedRun<M, F>);
+/// Stops the run if the calling thread leaves it by unwinding (a sink panicked), so the
+/// workers do not go on without it.
+struct StopOnUnwind<'a, M: CellModel + 'static, F: Facade>(&'a SharedRun<M, F>);
 
-impl<M: CellModel + 'static, F: Facade> Drop for Closing<'_, M, F> {
+impl<M: CellModel + 'static, F: Facade> Drop for StopOnUnwind<'_, M, F> {
     fn drop(&mut self) {
         if std::thread::panicking() {
             self.0.stop.store(1);
             self.0.set_status(RunStatus::Done);
         }
-        self.0.closing.store(1);
     }
 }
 

@@ -1,5 +1,4 @@
-//! The state of a threaded run that the worker threads, the finisher and the output stage
-//! share, and its basic operations: the run status, queueing a world, sending a message,
+//! The state of a threaded run that the worker threads and the output stage share, and its basic operations: the run status, queueing a world, sending a message,
 //! posting an input.
 
 use super::output::{Assembly, FinishedFrame, Output};
@@ -7,6 +6,8 @@ use crate::exec::error::{ExecError, InputError};
 use crate::exec::load::LoadMeter;
 use crate::exec::schedule::Schedule;
 use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
+use crate::exec::LastFrame;
+use crate::frame::StatesWanted;
 use crate::grid::Grid;
 use crate::kernel::message::{Input, Message};
 use crate::kernel::world::World;
@@ -46,8 +47,7 @@ impl RunStatus {
 /// sink must slow the run, not grow it (SPEC.md §K7).
 pub(super) const UNDELIVERED_WINDOWS: Step = 4;
 
-/// The state of a threaded run that the worker threads, the finisher and the output stage
-/// share.
+/// The state of a threaded run that the worker threads and the output stage share.
 pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     /// The worlds, each under its own lock (a world runs on one thread at a time).
     pub(super) worlds: Vec<F::Mutex<ThreadedWorld<M>>>,
@@ -79,7 +79,7 @@ pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     pub(super) waiting: Injector<(usize, u64)>,
     /// The current GVT.
     pub(super) gvt: F::Atomic,
-    /// The last step whose frame went to the finisher (0 before any).
+    /// The last step queued for finishing (0 before any).
     pub(super) committed: F::Atomic,
     /// The last step the sink has been handed (0 before any).
     pub(super) delivered: F::Atomic,
@@ -105,14 +105,16 @@ pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     pub(super) compute_ahead: bool,
     /// Committed steps being assembled from the worlds' contributions.
     pub(super) assembly: F::Mutex<Assembly<M>>,
-    /// Whole committed steps waiting for the finisher, and the run's statistics.
+    /// Whole committed steps waiting to be finished, and the run's statistics.
     pub(super) out: F::Mutex<Output<M>>,
-    /// Frames the finisher sorted and hashed, in step order, waiting for the output stage
+    /// Frames sorted and hashed, in step order, waiting for the output stage
     /// (the calling thread, which hands them to the sink).
     pub(super) finished: F::Mutex<VecDeque<FinishedFrame<M>>>,
-    /// 1 once no more committed steps will come: the finisher finishes what is pending and
-    /// returns.
-    pub(super) closing: F::Atomic,
+    /// The last frame finished (a step no world changed keeps its hash), held by the one
+    /// thread finishing frames at a time ([`SharedRun::finish_pending`]).
+    pub(super) finishing: F::Mutex<Option<LastFrame>>,
+    /// What the sink wants of each frame's states.
+    pub(super) wanted: StatesWanted,
     /// The first error of the run (a world panicked, the run stalled).
     pub(super) error: F::Mutex<Option<ExecError>>,
     /// The inputs posted so far: their number (the next input's sequence number) and one

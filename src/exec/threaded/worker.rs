@@ -51,6 +51,11 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
                     let g0 = Instant::now();
                     self.gvt_round();
                     times.gvt_seconds += g0.elapsed().as_secs_f64();
+                    // The turn may have queued committed steps: they are finished now, in
+                    // step order, without the world's lock (SPEC.md §10). Busy time.
+                    let f0 = Instant::now();
+                    self.finish_pending();
+                    times.busy_seconds += f0.elapsed().as_secs_f64();
                 }
                 None => {
                     let g0 = Instant::now();
