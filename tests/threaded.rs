@@ -181,17 +181,27 @@ fn a_panic_while_hashing_a_frame_ends_the_run_with_an_error_naming_the_step() {
             KernelConfig::new(2).window(8),
             KernelConfig::new(2).window(8).balance(balancing.clone()),
         ] {
-            let err = run_threaded(
-                Planted {
-                    step_panics_at: None,
-                },
-                grid.clone(),
-                bodies.clone(),
-                &config,
-                threads,
-                40,
+            // The sink never gets a frame after the one that failed: the steps it is
+            // handed run 1, 2, … without a gap, and stop before the unhashable step.
+            let mut handed = Vec::new();
+            let err = run_threaded_with::<_, StdFacade>(
+                ThreadedSetup::new(
+                    Planted {
+                        step_panics_at: None,
+                    },
+                    grid.clone(),
+                    bodies.clone(),
+                ),
+                &ThreadedOptions::new(&config, threads, 40),
+                |f, _| handed.push(f.step),
             )
             .unwrap_err();
+            let contiguous: Vec<u64> = (1..=handed.len() as u64).collect();
+            assert_eq!(handed, contiguous, "frames handed to the sink");
+            assert!(
+                handed.len() < UNHASHABLE_STEP as usize,
+                "a frame at or after the unhashable step reached the sink: {handed:?}"
+            );
             let text = err.to_string();
             assert!(matches!(err, ExecError::Thread(_)), "{text}");
             assert!(

@@ -16,7 +16,8 @@ pub trait FacadeMutex<T>: Send + Sync {
     fn new(v: T) -> Self;
     /// Locks, ignoring poisoning (a panicking world ends the run anyway).
     fn lock(&self) -> Self::Guard<'_>;
-    /// Locks if the lock is free now (ignoring poisoning); `None` if another thread holds it.
+    /// Locks if the lock is free now (ignoring poisoning); `None` only if another thread
+    /// holds it, never spuriously (the threaded executor's frame finishing relies on it).
     fn try_lock(&self) -> Option<Self::Guard<'_>>;
 }
 

@@ -138,21 +138,22 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
     /// frames for the output stage, unless another thread is finishing them now: that
     /// thread looks at the queue again after it lets go, so a step queued meanwhile is
     /// never left behind. A worker calls it after each turn of a world, without the
-    /// world's lock (SPEC.md §10). Steps after the sink stopped the run, or after it
-    /// failed, are dropped unfinished.
+    /// world's lock (SPEC.md §10). Steps after the sink stopped the run, after the run
+    /// failed, or after finishing a frame panicked (sticky: `Finishing::failed`), are
+    /// dropped unfinished.
     pub(super) fn finish_pending(&self) {
         loop {
-            let Some(mut last) = self.finishing.try_lock() else {
+            let Some(mut finishing) = self.finishing.try_lock() else {
                 return;
             };
             while let Some((step, partial)) = self.pop_pending() {
-                if self.stop.load() == 1 || self.status() == RunStatus::Failed {
+                if finishing.failed || self.stop.load() == 1 || self.status() == RunStatus::Failed {
                     continue;
                 }
                 // A model's hash panicking stops the run with an error instead of leaving
                 // the workers waiting for a sink that no frame reaches.
                 let finished = catch_unwind(AssertUnwindSafe(|| {
-                    finish_frame::<M>(step, partial, &self.wanted, &mut last)
+                    finish_frame::<M>(step, partial, &self.wanted, &mut finishing.last)
                 }));
                 match finished {
                     Ok((frame, states)) => self.finished.lock().push_back(FinishedFrame {
@@ -161,15 +162,15 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
                         states,
                     }),
                     Err(p) => {
+                        finishing.failed = true;
                         self.fail(ExecError::Thread(ThreadPanicked(format!(
                             "finishing the frame of step {step} panicked: {}",
                             panic_message(&*p)
                         ))));
-                        return;
                     }
                 }
             }
-            drop(last);
+            drop(finishing);
             // A step queued while this thread let go: its queuer found the lock taken and
             // left the step to this thread.
             if self.out.lock().pending.is_empty() {

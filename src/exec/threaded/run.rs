@@ -5,7 +5,9 @@
 use super::options::{ThreadedOptions, ThreadedSetup};
 use super::output::{Assembly, FinishedFrame, Output};
 use super::report::ThreadedReport;
-use super::shared::{InputLog, RunStatus, SharedRun, ThreadedWorld, UNDELIVERED_WINDOWS};
+use super::shared::{
+    Finishing, InputLog, RunStatus, SharedRun, ThreadedWorld, UNDELIVERED_WINDOWS,
+};
 use crate::exec::control::RunControl;
 use crate::exec::error::ExecError;
 use crate::exec::live::{LiveStatus, WorldStatus};
@@ -145,7 +147,7 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
         }),
         out: F::Mutex::new(Output::default()),
         finished: F::Mutex::new(VecDeque::new()),
-        finishing: F::Mutex::new(None),
+        finishing: F::Mutex::new(Finishing::default()),
         wanted: wanted.clone(),
         error: F::Mutex::new(None),
         inputs: F::Mutex::new(InputLog {
@@ -283,10 +285,6 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     let epochs = epochs();
     drop(stop_on_unwind);
     epochs?;
-    // Every worker has returned; whoever queued a step finished it or left it to the thread
-    // finishing then, which looked again before it let go. Nothing is pending but steps
-    // after the sink stopped the run, which are dropped unfinished.
-    shared.finish_pending();
     if let Some(e) = shared.error.lock().take() {
         return Err(e);
     }
@@ -405,6 +403,13 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
             thread_error.get_or_insert(e);
         }
     }
+    // Whoever queued a step finished it, or left it to the thread finishing then, which
+    // looked at the queue again before it let go (stopped or failed runs drop theirs): a
+    // step still queued here would be a step the sink waits for in vain.
+    assert!(
+        shared.out.lock().pending.is_empty() || thread_error.is_some(),
+        "a committed step was queued and never finished"
+    );
     if let Some(e) = shared.error.lock().take() {
         return Err(e);
     }

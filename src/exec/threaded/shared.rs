@@ -1,5 +1,5 @@
-//! The state of a threaded run that the worker threads and the output stage share, and its basic operations: the run status, queueing a world, sending a message,
-//! posting an input.
+//! The state of a threaded run that the worker threads and the output stage share, and its
+//! basic operations: the run status, queueing a world, sending a message, posting an input.
 
 use super::output::{Assembly, FinishedFrame, Output};
 use crate::exec::error::{ExecError, InputError};
@@ -110,9 +110,9 @@ pub(super) struct SharedRun<M: CellModel + 'static, F: Facade> {
     /// Frames sorted and hashed, in step order, waiting for the output stage
     /// (the calling thread, which hands them to the sink).
     pub(super) finished: F::Mutex<VecDeque<FinishedFrame<M>>>,
-    /// The last frame finished (a step no world changed keeps its hash), held by the one
-    /// thread finishing frames at a time ([`SharedRun::finish_pending`]).
-    pub(super) finishing: F::Mutex<Option<LastFrame>>,
+    /// What the one thread finishing frames at a time holds
+    /// ([`SharedRun::finish_pending`]; only ever try-locked).
+    pub(super) finishing: F::Mutex<Finishing>,
     /// What the sink wants of each frame's states.
     pub(super) wanted: StatesWanted,
     /// The first error of the run (a world panicked, the run stalled).
@@ -138,6 +138,16 @@ pub(super) struct ThreadedWorld<M: CellModel> {
     pub(super) contributed: Step,
     /// What the next balancing round measures of it (busy CPU time, lead over GVT).
     pub(super) meter: LoadMeter,
+}
+
+/// The state carried from one finished frame to the next.
+#[derive(Default)]
+pub(super) struct Finishing {
+    /// The last frame finished (a step no world changed keeps its hash).
+    pub(super) last: Option<LastFrame>,
+    /// Whether finishing a frame panicked: no later step is finished, so the sink never
+    /// gets a frame after a gap, whatever the run's status says meanwhile.
+    pub(super) failed: bool,
 }
 
 /// The inputs posted so far.
