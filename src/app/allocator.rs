@@ -5,7 +5,8 @@
 //! Why: in a threaded run a state is allocated by the worker that computes it and often
 //! freed by another thread (the worker finishing a committed frame drops the last
 //! reference of another world's states, fossil collection runs wherever its world runs
-//! next). mimalloc collects those frees lazily, so the allocating thread keeps taking fresh pages while the freed ones sit
+//! next). mimalloc collects those frees lazily, so the allocating thread keeps taking
+//! fresh pages while the freed ones sit
 //! idle, and with its default purge delay (1 s) it returns them to the OS and soon faults
 //! them back in, each one zeroed by the kernel. On 8,000 falling cubes on two threads that
 //! was 2,717 page faults in 600 steps against 296 with purging off (docs/performance.md,
@@ -40,19 +41,15 @@ fn purge_delay_in_environment() -> bool {
 }
 
 /// Turns transparent huge pages off for the whole process from now on (Linux; elsewhere
-/// nothing). Returns whether they are off.
-fn disable_transparent_huge_pages() -> bool {
+/// nothing: a hint, whose failure changes nothing but the resident set).
+fn disable_transparent_huge_pages() {
     #[cfg(target_os = "linux")]
-    {
-        // SAFETY: `prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)` takes integers only and sets a
-        // flag of this process's address space that the kernel checks before it backs a
-        // fault with a huge page; it reads or writes no memory of ours. A failure (an old
-        // kernel) is reported through the return value and changes nothing.
-        unsafe { libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0) == 0 }
-    }
-    #[cfg(not(target_os = "linux"))]
-    {
-        false
+    // SAFETY: `prctl(PR_SET_THP_DISABLE, 1, 0, 0, 0)` takes integers only and sets a flag
+    // of this process's address space that the kernel checks before it backs a fault with
+    // a huge page; it reads or writes no memory of ours. A failure (an old kernel) returns
+    // -1 and changes nothing.
+    unsafe {
+        libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0);
     }
 }
 
