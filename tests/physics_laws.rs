@@ -912,3 +912,39 @@ fn a_non_finite_state_is_a_hard_error_naming_body_step_and_field() {
         "{msg}"
     );
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+
+    /// A body in free flight keeps its momentum however slowly it moves: slower than the
+    /// sleep speed, touching nothing, it never falls asleep (which would freeze it in
+    /// mid-air, SPEC.md §5.4), and after 120 steps it still has its velocities. A body that
+    /// does not move at all does fall asleep, which changes nothing about it.
+    #[test]
+    fn a_slow_body_in_free_flight_keeps_its_momentum(
+        a in drawn(),
+        direction in prop::array::uniform3(-1.0f32..1.0),
+        fraction in 0.0f32..1.0,
+    ) {
+        use soda::math::Vec3;
+        let raw = Vec3::from(direction);
+        let d = if raw.norm() < 0.1 { Vec3::x() } else { raw.normalize() };
+        let material = Material { density: 1.0, friction: 0.5, restitution: 0.0 };
+        let probe = free_space().build().unwrap();
+        let speed = fraction * probe.solver.sleep_speed;
+        let sleep_steps = probe.solver.sleep_steps;
+        let mut moving = spec(0, &a, material, [0.0; 3], (d * speed).into());
+        moving.angular_velocity = [0.0; 3];
+        let mut still = spec(1, &a, material, [20.0, 0.0, 0.0], [0.0; 3]);
+        still.angular_velocity = [0.0; 3];
+        let h = history(free_space().body_spec(moving).body_spec(still).build().unwrap(), 120);
+        let last = &h[h.len() - 1];
+        prop_assert_eq!(last[0].linvel, h[0][0].linvel, "the slow body lost its velocity");
+        prop_assert_eq!(last[0].rest_steps, 0);
+        let moved = (last[0].position - h[0][0].position).norm();
+        let expected = speed * 120.0 * probe.dt;
+        prop_assert!((moved - expected).abs() <= 1e-3 + 1e-3 * expected, "moved {} m, expected {} m", moved, expected);
+        prop_assert_eq!(u32::from(last[1].rest_steps), sleep_steps, "the still body is asleep");
+        prop_assert_eq!(last[1].position, h[0][1].position);
+    }
+}

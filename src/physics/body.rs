@@ -252,6 +252,15 @@ impl Body {
             && self.angvel.norm() * self.bounding_radius() <= speed
     }
 
+    /// Whether both velocities are exactly zero in every component (either sign): the body
+    /// does not move at all, so freezing it changes nothing (SPEC.md §5.4).
+    pub fn is_still(&self) -> bool {
+        self.linvel
+            .iter()
+            .chain(self.angvel.iter())
+            .all(|&c| c == 0.0)
+    }
+
     /// The world-frame inverse inertia at orientation `q`, `R · diag(I⁻¹) · Rᵀ`; exactly
     /// `I⁻¹` times the identity for a body whose principal inverse inertias are equal (a ball,
     /// a cube), whose inertia does not depend on its orientation. Rounding the product made a

@@ -66,6 +66,10 @@ struct Contacts<'a> {
     pairs: Vec<PairEntry<'a>>,
     /// Whether every body partner with contact points was quiet at step `t` (SPEC.md §5.4).
     partners_quiet: bool,
+    /// Whether the body has contact points with a body or the environment at step `t`: a
+    /// body touching nothing is in free flight and never falls asleep while it moves
+    /// (SPEC.md §5.4).
+    touching: bool,
     /// The body's support depth after this step (SPEC.md §5.2).
     support_depth: u32,
 }
@@ -100,6 +104,7 @@ impl RigidBodyModel {
         cache: &mut ManifoldCache,
     ) -> Contacts<'a> {
         let mut partners_quiet = true;
+        let mut touching = false;
         let mut support_depth = u32::MAX;
         let cap = self.prediction();
         let (g, margin) = (self.gravity.norm(), self.params.margin);
@@ -124,6 +129,7 @@ impl RigidBodyModel {
                 continue;
             };
             partners_quiet &= j.is_quiet(self.params.sleep_speed);
+            touching = true;
             match self.support(a, b, &m) {
                 // Shock propagation: `own` does not carry the weight of a partner resting on
                 // it, but stops its own approach to it (a carried set); a sleeping partner is a
@@ -185,6 +191,7 @@ impl RigidBodyModel {
                 }
             }
             sets.push(env);
+            touching = true;
         }
         if support_depth == u32::MAX {
             if let Some(depth) = self.landing_depth(own, candidates) {
@@ -196,6 +203,7 @@ impl RigidBodyModel {
             pairs,
             carried,
             partners_quiet,
+            touching,
             support_depth: if support_depth == u32::MAX {
                 0
             } else {
@@ -816,8 +824,11 @@ impl CellModel for RigidBodyModel {
             // Saturating: a column deeper than 65,535 bodies counts as that deep.
             next.support_depth = found.support_depth.min(u32::from(u16::MAX)) as u16;
             let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);
+            // A body in free flight keeps its momentum: it counts towards sleep only while it
+            // touches something, or if it does not move at all (then freezing it is exact).
+            let held = found.touching || (own.is_still() && next.is_still());
             next.rest_steps =
-                if self.sleeping() && found.partners_quiet && quiet(own) && quiet(&next) {
+                if self.sleeping() && held && found.partners_quiet && quiet(own) && quiet(&next) {
                     own.rest_steps
                         .saturating_add(1)
                         .min(self.params.sleep_limit())
