@@ -287,3 +287,118 @@ fn inputs_after_the_last_step_are_named_in_a_warning() {
         "{err}"
     );
 }
+
+fn cube(id: u64, y: f32) -> soda::scene::BodySpec {
+    soda::scene::BodySpec {
+        id,
+        shape: soda::Shape::Cuboid {
+            half_extents: [0.5; 3],
+        },
+        material: soda::physics::Material::default(),
+        position: [0.0, y, 0.0],
+        rotation: [0.0; 3],
+        velocity: [0.0; 3],
+        angular_velocity: [0.0; 3],
+    }
+}
+
+/// Removing the bottom cube of a sleeping stack of three wakes the cube it carried, and that
+/// one the cube above it: both fall and land a cube lower, on every executor with the same
+/// bits. The removed cube is in the state of the removal's step (marked as leaving) and gone
+/// from the next. Before, a `remove` woke nothing and the stack stayed in mid-air.
+#[test]
+fn removing_a_support_wakes_what_rested_on_it_and_it_falls() {
+    let scene = SceneBuilder::new([-4.0, 0.0, -4.0], [4.0, 8.0, 4.0])
+        .ground(Some(0.0))
+        .body_spec(cube(1, 0.5))
+        .body_spec(cube(2, 1.5))
+        .body_spec(cube(3, 2.5))
+        .build()
+        .unwrap();
+    let sleep_steps = scene.solver.sleep_steps;
+    let script = parse_inputs(
+        "[[inputs]]\nstep = 150\naction = \"remove\"\nid = 1\n",
+        SceneFormat::Toml,
+        "script",
+    )
+    .unwrap();
+    let inputs = script.to_inputs(&scene, "script", 1).unwrap();
+    let state_at = |step: u64, options: RunOptions| {
+        let mut got: Vec<Body> = Vec::new();
+        Runner::new(scene.model(), scene.grid(), scene.initial_bodies())
+            .options(options)
+            .inputs(inputs.clone())
+            .states(StatesWanted::at(step))
+            .run(step, |f, states, _| {
+                if let (true, Some(s)) = (f.step == step, states) {
+                    got = s.iter().map(|b| (*b).clone()).collect();
+                }
+            })
+            .unwrap();
+        got
+    };
+    let before = state_at(149, RunOptions::reference());
+    assert_eq!(before.len(), 3);
+    assert!(
+        before
+            .iter()
+            .all(|b| u32::from(b.rest_steps) == sleep_steps),
+        "the stack is asleep before the removal: {before:?}"
+    );
+    let at = state_at(150, RunOptions::reference());
+    assert_eq!(at.len(), 3, "the removed cube is in its step's state");
+    assert!(at[0].is_leaving() && !at[1].is_leaving());
+    let after = state_at(151, RunOptions::reference());
+    assert_eq!(after.iter().map(|b| b.id()).collect::<Vec<_>>(), [2, 3]);
+    assert_eq!(after[0].rest_steps, 0, "the cube it carried woke");
+    let end = state_at(330, RunOptions::reference());
+    for (b, y) in end.iter().zip([0.5f32, 1.5]) {
+        assert!(
+            (b.position.y - y).abs() < 0.02,
+            "body {} rests at y = {}, expected {y}",
+            b.id(),
+            b.position.y
+        );
+    }
+    let hash = |bodies: &[Body]| soda::state::canonical_hash::<RigidBodyModel>(bodies.iter());
+    for options in [
+        RunOptions::threaded(KernelConfig::new(2), 2),
+        RunOptions::virtual_exec(KernelConfig::new(4).mode(RollbackMode::Cell)),
+        RunOptions::virtual_exec(KernelConfig::new(3).mode(RollbackMode::World)),
+    ] {
+        assert_eq!(hash(&state_at(330, options)), hash(&end));
+    }
+}
+
+/// A body removed at a step is still in that step's state, so spawning its id again at
+/// the same step, or removing a body spawned at that step, is refused naming the entry.
+#[test]
+fn a_removal_and_a_spawn_of_one_id_at_one_step_are_refused() {
+    let scene = SceneBuilder::new([-4.0, 0.0, -4.0], [4.0, 8.0, 4.0])
+        .body_spec(cube(1, 0.5))
+        .build()
+        .unwrap();
+    let spawn = "[[inputs]]\nstep = 5\naction = \"spawn\"\nbody = { id = 1, shape = { type = \"ball\", radius = 0.3 }, position = [2.0, 3.0, 0.0] }\n";
+    let remove = "[[inputs]]\nstep = 5\naction = \"remove\"\nid = 1\n";
+    for (text, expected) in [
+        (
+            format!("{remove}\n{spawn}"),
+            "inputs[1].step` = 5 is invalid: inputs[0] removes body 1 at the same step",
+        ),
+        (
+            format!(
+                "{}\n{}",
+                spawn.replace("id = 1,", "id = 9,"),
+                remove.replace("id = 1", "id = 9")
+            ),
+            "inputs[1].step` = 5 is invalid: inputs[0] spawns the body at the same step",
+        ),
+    ] {
+        let script = parse_inputs(&text, SceneFormat::Toml, "script").unwrap();
+        let err = script
+            .to_inputs(&scene, "script", 1)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(expected), "{err}");
+    }
+}

@@ -111,6 +111,12 @@ impl Default for Material {
     }
 }
 
+/// The [`Body::support_depth`] of a body an input removes ([`Body::mark_leaving`]): the body
+/// is in the state of the removal's step, touches nothing in the step after it and is not
+/// in the next state, and every body it could touch wakes (SPEC.md §5.4). A computed depth
+/// saturates one below it.
+pub const LEAVING: u16 = u16::MAX;
+
 /// A dynamic rigid body: identity, constant properties and the state at one step.
 ///
 /// The constant properties (shape, inverse mass and inertia, friction, restitution) are
@@ -140,7 +146,8 @@ pub struct Body {
     /// of depth `k` (the least such), else its landing depth if it is about to land on a
     /// static surface or such a body, 0 if it rests on no support chain (in flight, or
     /// without gravity). Only a body of depth > 0 carries another by shock propagation.
-    /// Part of the hashed state.
+    /// [`LEAVING`] (65,535) marks a body an input removes: it is in this step's state and
+    /// gone from the next (SPEC.md §5.4). Part of the hashed state.
     pub support_depth: u16,
 }
 
@@ -250,6 +257,18 @@ impl Body {
     pub fn is_quiet(&self, speed: f32) -> bool {
         self.linvel.norm_squared() <= speed * speed
             && self.angvel.norm() * self.bounding_radius() <= speed
+    }
+
+    /// Whether an input removes this body at the current step ([`LEAVING`]).
+    #[inline]
+    pub fn is_leaving(&self) -> bool {
+        self.support_depth == LEAVING
+    }
+
+    /// Marks the body as removed at the current step ([`LEAVING`]): a removal that wakes
+    /// every body it could touch, where the kernel's `Input::Remove` wakes nothing.
+    pub fn mark_leaving(&mut self) {
+        self.support_depth = LEAVING;
     }
 
     /// Whether both velocities are exactly zero in every component (either sign): the body

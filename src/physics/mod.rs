@@ -12,7 +12,7 @@ mod params;
 mod props;
 mod solver;
 
-pub use body::{Body, Material, Shape};
+pub use body::{Body, Material, Shape, LEAVING};
 pub use contact::{ContactPoint, ContactSet, SetRole};
 pub use environment::{DomainBox, Environment, Plane, StaticCuboid};
 pub use event::EventKind;

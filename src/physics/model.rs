@@ -1,6 +1,6 @@
 //! [`RigidBodyModel`]: the rigid-body implementation of [`CellModel`].
 
-use super::body::{Body, Shape};
+use super::body::{Body, Shape, LEAVING};
 use super::contact::{
     environment_contacts, keep_distance, near, pair_manifold, speculative_distance, view,
     ContactSet, PairManifold, SetRole,
@@ -114,6 +114,7 @@ impl RigidBodyModel {
         let mut carried = Vec::new();
         for c in candidates {
             if c.body.id() == own.body.id()
+                || c.body.is_leaving()
                 || !own.may_touch(c, slack)
                 || !own.boxes_within(c, own.motion + c.motion + slack)
             {
@@ -244,6 +245,7 @@ impl RigidBodyModel {
             let j = c.body;
             if j.id() == own.body.id()
                 || j.support_depth == 0
+                || j.is_leaving()
                 || u32::from(j.support_depth) + 1 >= depth
                 || !own.may_touch(c, own.motion + c.motion + 2.0 * slack)
                 || !own.boxes_within(c, 2.0 * (own.motion + c.motion + slack))
@@ -418,7 +420,7 @@ impl RigidBodyModel {
                 continue;
             }
             for k in cell.iter() {
-                if k.id() == own.id() || k.id() == entry.partner.id() {
+                if k.id() == own.id() || k.id() == entry.partner.id() || k.is_leaving() {
                     continue;
                 }
                 if let Some(e) = self.edge(entry.partner, k, cache) {
@@ -443,7 +445,7 @@ impl RigidBodyModel {
 
     /// Whether `b` is asleep at step `t` (its rest counter reached `sleep_steps`).
     pub fn is_asleep(&self, b: &Body) -> bool {
-        self.sleeping() && b.rest_steps >= self.params.sleep_limit()
+        self.sleeping() && b.rest_steps >= self.params.sleep_limit() && !b.is_leaving()
     }
 
     /// Whether bodies `i` and `k` can interact during this step (bounding spheres within the
@@ -666,7 +668,14 @@ impl CellModel for RigidBodyModel {
         let mut candidates: Vec<Candidate<'_>> = Vec::new();
         let mut cache = Vec::new();
         let mut rows = SolveRows::default();
+        // Bodies removed by an input at this step (SPEC.md §5.4), found once per cell: there
+        // are none in nearly every neighbourhood.
+        let leaving: Vec<&Body> = nb.iter().filter(|k| k.is_leaving()).collect();
         for own in nb.own() {
+            // Removed by an input at this step (SPEC.md §5.4): not in the next state.
+            if own.is_leaving() {
+                continue;
+            }
             if self.is_asleep(own)
                 && !nb
                     .iter()
@@ -822,19 +831,26 @@ impl CellModel for RigidBodyModel {
             assert_finite(&next, step);
             self.cap(own, &mut next, step, events);
             // Saturating: a column deeper than 65,535 bodies counts as that deep.
-            next.support_depth = found.support_depth.min(u32::from(u16::MAX)) as u16;
+            next.support_depth = found.support_depth.min(u32::from(LEAVING) - 1) as u16;
             let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);
             // A body in free flight keeps its momentum: it counts towards sleep only while it
             // touches something, or if it does not move at all (then freezing it is exact).
             let held = found.touching || (own.is_still() && next.is_still());
-            next.rest_steps =
-                if self.sleeping() && held && found.partners_quiet && quiet(own) && quiet(&next) {
-                    own.rest_steps
-                        .saturating_add(1)
-                        .min(self.params.sleep_limit())
-                } else {
-                    0
-                };
+            // A body that a removed one could touch wakes: what it rested on may be gone.
+            let disturbed = leaving.iter().any(|k| self.can_reach(own, k));
+            next.rest_steps = if self.sleeping()
+                && held
+                && !disturbed
+                && found.partners_quiet
+                && quiet(own)
+                && quiet(&next)
+            {
+                own.rest_steps
+                    .saturating_add(1)
+                    .min(self.params.sleep_limit())
+            } else {
+                0
+            };
             if !self.domain.contains(&next.position) {
                 events.push(Event {
                     step,

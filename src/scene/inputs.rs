@@ -217,6 +217,20 @@ impl InputScript {
                         largest,
                         environment.get_or_insert_with(|| scene.model().environment),
                     )?;
+                    if let Some((_, Some(j))) = presence.ids.get(&body.id) {
+                        if self.inputs[*j].step == e.step {
+                            return Err(fail(
+                                i,
+                                "step",
+                                e.step.to_string(),
+                                format!(
+                                    "inputs[{j}] removes body {} at the same step, and a removed body is gone only from the next step on (SPEC.md §5.4): spawn it at step {} or later",
+                                    body.id,
+                                    e.step + 1
+                                ),
+                            ));
+                        }
+                    }
                     if let Some((from, None)) = presence.ids.get(&body.id) {
                         return Err(fail(
                             i,
@@ -254,10 +268,7 @@ impl InputScript {
                                 format!("the body is gone by then: inputs[{j}] removes it"),
                             ))
                         }
-                        Some((Some(j), None))
-                            if self.inputs[*j].step == e.step
-                                && e.action != InputAction::Remove =>
-                        {
+                        Some((Some(j), None)) if self.inputs[*j].step == e.step => {
                             return Err(fail(
                                 i,
                                 "step",
@@ -274,7 +285,7 @@ impl InputScript {
                             if let Some(p) = presence.ids.get_mut(&id) {
                                 p.1 = Some(i);
                             }
-                            Input::Remove(id)
+                            Input::Edit(id, removal())
                         }
                         InputAction::Push => {
                             required("impulse", e.impulse.is_some())?;
@@ -356,6 +367,19 @@ pub fn push(impulse: Vec3, angular: Vec3) -> Edit<Body> {
             .rotation
             .transform_vector(&local.component_mul(&b.inv_inertia()));
         b.rest_steps = 0;
+        b
+    })
+}
+
+/// The edit of a `remove` input: the body is marked as leaving ([`Body::mark_leaving`]), so
+/// it is in the state of the input's step, touches nothing in the step after it, is gone
+/// from the next state, and wakes every body it could touch (SPEC.md §5.4). The kernel's
+/// `Input::Remove` takes a body out at once and wakes nothing: a body asleep on it would
+/// stay in mid-air.
+pub fn removal() -> Edit<Body> {
+    Edit::new(|b: &Body| {
+        let mut b = b.clone();
+        b.mark_leaving();
         b
     })
 }
