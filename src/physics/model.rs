@@ -668,9 +668,9 @@ impl CellModel for RigidBodyModel {
         let mut candidates: Vec<Candidate<'_>> = Vec::new();
         let mut cache = Vec::new();
         let mut rows = SolveRows::default();
-        // Bodies removed by an input at this step (SPEC.md §5.4), found once per cell: there
-        // are none in nearly every neighbourhood.
-        let leaving: Vec<&Body> = nb.iter().filter(|k| k.is_leaving()).collect();
+        // Bodies removed by an input at this step (SPEC.md §5.4), found once per cell and only
+        // if a body would otherwise count a quiet step: a moving scene never looks.
+        let leaving: OnceCell<Vec<&Body>> = OnceCell::new();
         for own in nb.own() {
             // Removed by an input at this step (SPEC.md §5.4): not in the next state.
             if own.is_leaving() {
@@ -837,13 +837,18 @@ impl CellModel for RigidBodyModel {
             // touches something, or if it does not move at all (then freezing it is exact).
             let held = found.touching || (own.is_still() && next.is_still());
             // A body that a removed one could touch wakes: what it rested on may be gone.
-            let disturbed = leaving.iter().any(|k| self.can_reach(own, k));
+            let disturbed = || {
+                leaving
+                    .get_or_init(|| nb.iter().filter(|k| k.is_leaving()).collect())
+                    .iter()
+                    .any(|k| self.can_reach(own, k))
+            };
             next.rest_steps = if self.sleeping()
                 && held
-                && !disturbed
                 && found.partners_quiet
                 && quiet(own)
                 && quiet(&next)
+                && !disturbed()
             {
                 own.rest_steps
                     .saturating_add(1)
