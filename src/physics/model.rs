@@ -70,6 +70,9 @@ struct Contacts<'a> {
     /// body touching nothing is in free flight and never falls asleep while it moves
     /// (SPEC.md §5.4).
     touching: bool,
+    /// Whether a body an input removes at this step (SPEC.md §5.4) can reach this one: what
+    /// it rested on may be gone, so it wakes.
+    disturbed: bool,
     /// The body's support depth after this step (SPEC.md §5.2).
     support_depth: u32,
 }
@@ -105,6 +108,7 @@ impl RigidBodyModel {
     ) -> Contacts<'a> {
         let mut partners_quiet = true;
         let mut touching = false;
+        let mut disturbed = false;
         let mut support_depth = u32::MAX;
         let cap = self.prediction();
         let (g, margin) = (self.gravity.norm(), self.params.margin);
@@ -114,10 +118,15 @@ impl RigidBodyModel {
         let mut carried = Vec::new();
         for c in candidates {
             if c.body.id() == own.body.id()
-                || c.body.is_leaving()
                 || !own.may_touch(c, slack)
                 || !own.boxes_within(c, own.motion + c.motion + slack)
             {
+                continue;
+            }
+            if c.body.is_leaving() {
+                // The candidates, through the filters above, hold every body that can reach
+                // `own` (they are supersets of the speculative-distance test).
+                disturbed |= self.can_reach(own.body, c.body);
                 continue;
             }
             let j = c.body;
@@ -205,6 +214,7 @@ impl RigidBodyModel {
             carried,
             partners_quiet,
             touching,
+            disturbed,
             support_depth: if support_depth == u32::MAX {
                 0
             } else {
@@ -668,9 +678,6 @@ impl CellModel for RigidBodyModel {
         let mut candidates: Vec<Candidate<'_>> = Vec::new();
         let mut cache = Vec::new();
         let mut rows = SolveRows::default();
-        // Bodies removed by an input at this step (SPEC.md §5.4), found once per cell and only
-        // if a body would otherwise count a quiet step: a moving scene never looks.
-        let leaving: OnceCell<Vec<&Body>> = OnceCell::new();
         for own in nb.own() {
             // Removed by an input at this step (SPEC.md §5.4): not in the next state.
             if own.is_leaving() {
@@ -836,19 +843,15 @@ impl CellModel for RigidBodyModel {
             // A body in free flight keeps its momentum: it counts towards sleep only while it
             // touches something, or if it does not move at all (then freezing it is exact).
             let held = found.touching || (own.is_still() && next.is_still());
-            // A body that a removed one could touch wakes: what it rested on may be gone.
-            let disturbed = || {
-                leaving
-                    .get_or_init(|| nb.iter().filter(|k| k.is_leaving()).collect())
-                    .iter()
-                    .any(|k| self.can_reach(own, k))
-            };
+            // A body that a removed one could touch wakes (`disturbed`): what it rested on
+            // may be gone.
+
             next.rest_steps = if self.sleeping()
                 && held
                 && found.partners_quiet
                 && quiet(own)
                 && quiet(&next)
-                && !disturbed()
+                && !found.disturbed
             {
                 own.rest_steps
                     .saturating_add(1)
