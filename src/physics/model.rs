@@ -117,16 +117,18 @@ impl RigidBodyModel {
         let mut pairs = Vec::new();
         let mut carried = Vec::new();
         for c in candidates {
-            if c.body.id() == own.body.id()
-                || !own.may_touch(c, slack)
-                || !own.boxes_within(c, own.motion + c.motion + slack)
-            {
+            if c.body.id() == own.body.id() || !own.may_touch(c, slack) {
                 continue;
             }
             if c.body.is_leaving() {
-                // The candidates, through the filters above, hold every body that can reach
-                // `own` (they are supersets of the speculative-distance test).
+                // The candidates that `may_touch` keeps hold every body that can reach `own`
+                // (a superset of the speculative-distance test of bounding spheres; the box
+                // test below is not one for cuboids, whose boxes are smaller than their
+                // spheres).
                 disturbed |= self.can_reach(own.body, c.body);
+                continue;
+            }
+            if !own.boxes_within(c, own.motion + c.motion + slack) {
                 continue;
             }
             let j = c.body;
@@ -837,7 +839,7 @@ impl CellModel for RigidBodyModel {
             }
             assert_finite(&next, step);
             self.cap(own, &mut next, step, events);
-            // Saturating: a column deeper than 65,535 bodies counts as that deep.
+            // Saturating below `LEAVING`: a column deeper than 65,534 bodies counts as that deep.
             next.support_depth = found.support_depth.min(u32::from(LEAVING) - 1) as u16;
             let quiet = |b: &Body| b.is_quiet(self.params.sleep_speed);
             // A body in free flight keeps its momentum: it counts towards sleep only while it
@@ -845,7 +847,6 @@ impl CellModel for RigidBodyModel {
             let held = found.touching || (own.is_still() && next.is_still());
             // A body that a removed one could touch wakes (`disturbed`): what it rested on
             // may be gone.
-
             next.rest_steps = if self.sleeping()
                 && held
                 && found.partners_quiet
