@@ -196,6 +196,27 @@ fn bad_input_scripts_are_refused_naming_the_entry_and_field() {
     assert!(err.contains("must be 10 or more"), "{err}");
 }
 
+/// The committed state at `step` of `scene` with `inputs` on the executor of `options`.
+fn state_at(
+    scene: &soda::Scene,
+    inputs: &[(u64, Input<Body>)],
+    step: u64,
+    options: RunOptions,
+) -> Vec<Body> {
+    let mut got: Vec<Body> = Vec::new();
+    Runner::new(scene.model(), scene.grid(), scene.initial_bodies())
+        .options(options)
+        .inputs(inputs.to_vec())
+        .states(StatesWanted::at(step))
+        .run(step, |f, states, _| {
+            if let (true, Some(s)) = (f.step == step, states) {
+                got = s.iter().map(|b| (*b).clone()).collect();
+            }
+        })
+        .unwrap();
+    got
+}
+
 fn ball(id: u64, position: [f32; 3], velocity: [f32; 3]) -> soda::scene::BodySpec {
     soda::scene::BodySpec {
         id,
@@ -231,22 +252,9 @@ fn push_changes_momentum_by_the_impulse_and_set_velocity_sets_it() {
     )
     .unwrap();
     let inputs = script.to_inputs(&scene, "script", 1).unwrap();
-    let state_at = |step: u64, options: RunOptions| {
-        let mut got: Vec<Body> = Vec::new();
-        Runner::new(scene.model(), scene.grid(), scene.initial_bodies())
-            .options(options)
-            .inputs(inputs.clone())
-            .states(StatesWanted::at(step))
-            .run(step, |f, states, _| {
-                if let (true, Some(s)) = (f.step == step, states) {
-                    got = s.iter().map(|b| (*b).clone()).collect();
-                }
-            })
-            .unwrap();
-        got
-    };
-    let before = state_at(4, RunOptions::reference());
-    let after = state_at(5, RunOptions::reference());
+    let at = |step: u64, options: RunOptions| state_at(&scene, &inputs, step, options);
+    let before = at(4, RunOptions::reference());
+    let after = at(5, RunOptions::reference());
     let (b1, a1) = (&before[0], &after[0]);
     let mass = b1.mass();
     for k in 0..3 {
@@ -261,7 +269,7 @@ fn push_changes_momentum_by_the_impulse_and_set_velocity_sets_it() {
     assert!((a1.angvel.y - (b1.angvel.y + 0.3 / inertia)).abs() < 1e-4);
     assert_eq!(after[1].linvel, soda::math::Vec3::new(0.0, 0.0, -2.0));
     let hash = |bodies: &[Body]| soda::state::canonical_hash::<RigidBodyModel>(bodies.iter());
-    let threaded = state_at(5, RunOptions::threaded(KernelConfig::new(2), 2));
+    let threaded = at(5, RunOptions::threaded(KernelConfig::new(2), 2));
     assert_eq!(hash(&threaded), hash(&after));
 }
 
@@ -323,21 +331,8 @@ fn removing_a_support_wakes_what_rested_on_it_and_it_falls() {
     )
     .unwrap();
     let inputs = script.to_inputs(&scene, "script", 1).unwrap();
-    let state_at = |step: u64, options: RunOptions| {
-        let mut got: Vec<Body> = Vec::new();
-        Runner::new(scene.model(), scene.grid(), scene.initial_bodies())
-            .options(options)
-            .inputs(inputs.clone())
-            .states(StatesWanted::at(step))
-            .run(step, |f, states, _| {
-                if let (true, Some(s)) = (f.step == step, states) {
-                    got = s.iter().map(|b| (*b).clone()).collect();
-                }
-            })
-            .unwrap();
-        got
-    };
-    let before = state_at(149, RunOptions::reference());
+    let at = |step: u64, options: RunOptions| state_at(&scene, &inputs, step, options);
+    let before = at(149, RunOptions::reference());
     assert_eq!(before.len(), 3);
     assert!(
         before
@@ -345,13 +340,13 @@ fn removing_a_support_wakes_what_rested_on_it_and_it_falls() {
             .all(|b| u32::from(b.rest_steps) == sleep_steps),
         "the stack is asleep before the removal: {before:?}"
     );
-    let at = state_at(150, RunOptions::reference());
-    assert_eq!(at.len(), 3, "the removed cube is in its step's state");
-    assert!(at[0].is_leaving() && !at[1].is_leaving());
-    let after = state_at(151, RunOptions::reference());
+    let removing = at(150, RunOptions::reference());
+    assert_eq!(removing.len(), 3, "the removed cube is in its step's state");
+    assert!(removing[0].is_leaving() && !removing[1].is_leaving());
+    let after = at(151, RunOptions::reference());
     assert_eq!(after.iter().map(|b| b.id()).collect::<Vec<_>>(), [2, 3]);
     assert_eq!(after[0].rest_steps, 0, "the cube it carried woke");
-    let end = state_at(330, RunOptions::reference());
+    let end = at(330, RunOptions::reference());
     for (b, y) in end.iter().zip([0.5f32, 1.5]) {
         assert!(
             (b.position.y - y).abs() < 0.02,
@@ -366,7 +361,7 @@ fn removing_a_support_wakes_what_rested_on_it_and_it_falls() {
         RunOptions::virtual_exec(KernelConfig::new(4).mode(RollbackMode::Cell)),
         RunOptions::virtual_exec(KernelConfig::new(3).mode(RollbackMode::World)),
     ] {
-        assert_eq!(hash(&state_at(330, options)), hash(&end));
+        assert_eq!(hash(&at(330, options)), hash(&end));
     }
 }
 

@@ -217,8 +217,8 @@ impl InputScript {
                         largest,
                         environment.get_or_insert_with(|| scene.model().environment),
                     )?;
-                    if let Some((_, Some(j))) = presence.ids.get(&body.id) {
-                        if self.inputs[*j].step == e.step {
+                    match presence.ids.get(&body.id) {
+                        Some((_, Some(j))) if self.inputs[*j].step == e.step => {
                             return Err(fail(
                                 i,
                                 "step",
@@ -228,21 +228,22 @@ impl InputScript {
                                     body.id,
                                     e.step + 1
                                 ),
-                            ));
+                            ))
                         }
-                    }
-                    if let Some((from, None)) = presence.ids.get(&body.id) {
-                        return Err(fail(
-                            i,
-                            "body.id",
-                            body.id.to_string(),
-                            format!(
-                                "must not be in use: {} has that id",
-                                from.map_or("a body of the scene".to_string(), |j| format!(
-                                    "the body inputs[{j}] spawns"
-                                ))
-                            ),
-                        ));
+                        Some((from, None)) => {
+                            return Err(fail(
+                                i,
+                                "body.id",
+                                body.id.to_string(),
+                                format!(
+                                    "must not be in use: {} has that id",
+                                    from.map_or("a body of the scene".to_string(), |j| format!(
+                                        "the body inputs[{j}] spawns"
+                                    ))
+                                ),
+                            ))
+                        }
+                        _ => {}
                     }
                     presence.ids.insert(body.id, (Some(i), None));
                     specs.insert(body.id, body);
