@@ -349,3 +349,91 @@ fn threaded_runs_with_a_laggard_lead_speculate_and_still_match_the_reference_bit
         eprintln!("{name}: {rolled_back} steps rolled back over the lead runs");
     }
 }
+
+/// An event whose clone panics when it carries `FRAGILE`: a user's event type with a
+/// faulty `Clone`. Worlds clone committed events when they hand them to the frame assembly,
+/// outside the computation a world's panic is caught in.
+#[derive(Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct FragileEvent(u32);
+
+const FRAGILE: u32 = 7;
+
+impl Clone for FragileEvent {
+    fn clone(&self) -> Self {
+        assert!(self.0 != FRAGILE, "planted event clone panic");
+        FragileEvent(self.0)
+    }
+}
+
+impl From<soda::LeftGrid> for FragileEvent {
+    fn from(_: soda::LeftGrid) -> Self {
+        FragileEvent(0)
+    }
+}
+
+/// [`Planted`]'s lattice, with one fragile event raised by body 0 at `step`.
+#[derive(Clone)]
+struct FragileEvents {
+    step: Step,
+}
+
+impl CellModel for FragileEvents {
+    type State = PlantedBody;
+    type Event = FragileEvent;
+    fn id(s: &Self::State) -> BodyId {
+        s.0
+    }
+    fn position(s: &Self::State) -> [f32; 3] {
+        s.1
+    }
+    fn step_cell(
+        &self,
+        step: Step,
+        _grid: &Grid,
+        nb: &Neighbourhood<'_, Self::State>,
+        out: &mut Vec<Self::State>,
+        events: &mut Vec<Event<FragileEvent>>,
+    ) {
+        for &(id, p, n, bad) in nb.own() {
+            if id == 0 && step == self.step {
+                events.push(Event {
+                    step,
+                    body: id,
+                    kind: FragileEvent(FRAGILE),
+                });
+            }
+            out.push((id, p, n + 1, bad));
+        }
+    }
+    fn hash_state(s: &Self::State, h: &mut StateHash) {
+        h.u32(s.2);
+    }
+}
+
+#[test]
+fn a_panic_outside_a_worlds_computation_ends_the_run_with_an_error_instead_of_hanging() {
+    let (grid, bodies) = planted_lattice(0);
+    for threads in [1, 2] {
+        let config = KernelConfig::new(2).window(8);
+        let (done, finished) = std::sync::mpsc::channel();
+        let (grid, bodies) = (grid.clone(), bodies.clone());
+        std::thread::spawn(move || {
+            let result = run_threaded(
+                FragileEvents { step: 5 },
+                grid,
+                bodies,
+                &config,
+                threads,
+                30,
+            );
+            let _ = done.send(result.map(|r| r.frames.len()));
+        });
+        let result = finished
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .unwrap_or_else(|_| panic!("the run with {threads} threads hung after a panic"));
+        let err = result.expect_err("a planted panic must fail the run");
+        let text = err.to_string();
+        assert!(matches!(err, ExecError::Thread(_)), "{text}");
+        assert!(text.contains("planted event clone panic"), "{text}");
+    }
+}
