@@ -225,7 +225,9 @@ pub(crate) struct SolveRows {
     offsets: Vec<Vec3>,
     impact: Vec<ImpactRow>,
     position: Vec<PositionRow>,
-    engaged_sets: Vec<bool>,
+    /// Per set, the fastest approach its points may keep in the impact pass (∞ until a point
+    /// of the set would touch within the substep).
+    landing_limits: Vec<f32>,
     bounced_sets: Vec<bool>,
 }
 
@@ -241,7 +243,7 @@ impl SolveRows {
         fresh(&mut self.offsets, points, Vec3::zeros());
         fresh(&mut self.impact, points, ImpactRow::default());
         fresh(&mut self.position, points, PositionRow::default());
-        fresh(&mut self.engaged_sets, sets, false);
+        fresh(&mut self.landing_limits, sets, f32::INFINITY);
         fresh(&mut self.bounced_sets, sets, false);
     }
 }
@@ -275,7 +277,7 @@ pub(crate) fn solve_body(
         offsets,
         impact,
         position,
-        engaged_sets,
+        landing_limits,
         bounced_sets,
     } = rows;
     let rest_threshold = 2.0 * gravity.norm() * h;
@@ -321,16 +323,25 @@ pub(crate) fn solve_body(
         // gap within the substep (plastic: an approach is stopped, never reflected here).
         // Once a point of a partner's manifold would touch within the substep, the other
         // points of that manifold may approach at most `landing_speed`: a tilted face lands
-        // as a face, not corner first (which would turn the fall into spin).
+        // as a face, not corner first (which would turn the fall into spin). A single point
+        // against the static environment (a ball on a wall, the ground or a static box) is
+        // not held back: it touches the surface in the substep it reaches it, instead of
+        // stopping short by up to its travel in a substep. (Several points are: removing
+        // a face's approach point after point in the velocity pass turns a fast face-on
+        // arrival into a spurious rebound.)
         let mut k = 0;
         for (s, set) in sets.iter().enumerate() {
             let mut engaged = false;
+            let mut first_touch = f32::INFINITY;
             for cp in &set.points {
                 let r = offsets[k];
                 let pj = cp.partner_point + cp.partner_velocity * h;
                 let gap0 = cp.normal.dot(&(b.position + r - pj));
                 let vn = cp.normal.dot(&(b.linvel + b.angvel.cross(&r)));
-                engaged |= gap0 + vn * h < 0.0;
+                if gap0 + vn * h < 0.0 {
+                    engaged = true;
+                    first_touch = first_touch.min(gap0.max(0.0) / h);
+                }
                 let rn = r.cross(&cp.normal);
                 let irn = f0.inv_inertia * rn;
                 let w_own = f0.inv_mass + rn.dot(&irn);
@@ -355,17 +366,17 @@ pub(crate) fn solve_body(
                 };
                 k += 1;
             }
-            engaged_sets[s] = engaged;
+            landing_limits[s] = match (engaged, set.partner, set.points.len()) {
+                (false, _, _) => f32::INFINITY,
+                (true, None, 1) => p.landing_speed.max(first_touch),
+                (true, _, _) => p.landing_speed,
+            };
         }
         for _ in 0..p.impact_iterations {
             let mut largest_change = 0.0f32;
             let mut k = 0;
             for (s, set) in sets.iter().enumerate() {
-                let limit = if engaged_sets[s] {
-                    p.landing_speed
-                } else {
-                    f32::INFINITY
-                };
+                let limit = landing_limits[s];
                 for cp in &set.points {
                     let row = &impact[k];
                     // n·(v + ω × r) = n·v + ω·(r × n).
