@@ -841,9 +841,10 @@ impl CellModel for RigidBodyModel {
                 // velocity turns along, so the spin keeps its body-frame axis and the
                 // rotational energy the pair's impulses left it (SPEC.md §5.3). Turning the
                 // body alone changed `½ωᵀIω` (+13 % in one step for a box spinning at
-                // 47 rad/s struck by a ball). A ball's energy does not depend on its
-                // orientation: its spin is left as it is.
-                if matches!(next.shape(), Shape::Cuboid { .. }) {
+                // 47 rad/s struck by a ball). A body whose principal inertias are equal
+                // (a ball, a cube) has the same energy in every orientation: its spin is
+                // left as it is, and so is its angular momentum.
+                if !next.props().isotropic() {
                     next.angvel = (next.rotation * before.inverse()) * next.angvel;
                 }
             }

@@ -15,8 +15,7 @@ pub struct SolverParams {
     pub impact_iterations: u32,
     /// Fastest approach, m/s, of the other points of a partner's manifold once one of its
     /// points touches within a substep (a tilted face lands as a face, not corner first).
-    /// A single point against the static environment may approach at least as fast as
-    /// brings it to the surface within the substep (SPEC.md §5.3).
+    /// A ball against the static environment is not held back (SPEC.md §5.3).
     pub landing_speed: f32,
     /// Relaxation factor applied to the averaged position correction.
     pub relaxation: f32,

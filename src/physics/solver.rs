@@ -281,6 +281,7 @@ pub(crate) fn solve_body(
         bounced_sets,
     } = rows;
     let rest_threshold = 2.0 * gravity.norm() * h;
+    let ball = matches!(body.shape(), Shape::Ball { .. });
     // Each pile point's mobility along its normal (the normals are fixed for the step); read
     // only at pile points, so left empty without a pile set.
     let mobilities: Vec<f32> = if sets.iter().any(|s| s.role == SetRole::Pile) {
@@ -323,25 +324,21 @@ pub(crate) fn solve_body(
         // gap within the substep (plastic: an approach is stopped, never reflected here).
         // Once a point of a partner's manifold would touch within the substep, the other
         // points of that manifold may approach at most `landing_speed`: a tilted face lands
-        // as a face, not corner first (which would turn the fall into spin). A single point
-        // against the static environment (a ball on a wall, the ground or a static box) is
-        // not held back: it touches the surface in the substep it reaches it, instead of
-        // stopping short by up to its travel in a substep. (Several points are: removing
-        // a face's approach point after point in the velocity pass turns a fast face-on
+        // as a face, not corner first (which would turn the fall into spin). A ball has no
+        // face to land: against the static environment (walls, ground, static boxes: one
+        // set) it is not held back, and touches the surface in the substep it reaches it,
+        // instead of stopping short by up to its travel in a substep. (A box is: removing a
+        // face's approach point after point in the velocity pass turns a fast face-on
         // arrival into a spurious rebound.)
         let mut k = 0;
         for (s, set) in sets.iter().enumerate() {
             let mut engaged = false;
-            let mut first_touch = f32::INFINITY;
             for cp in &set.points {
                 let r = offsets[k];
                 let pj = cp.partner_point + cp.partner_velocity * h;
                 let gap0 = cp.normal.dot(&(b.position + r - pj));
                 let vn = cp.normal.dot(&(b.linvel + b.angvel.cross(&r)));
-                if gap0 + vn * h < 0.0 {
-                    engaged = true;
-                    first_touch = first_touch.min(gap0.max(0.0) / h);
-                }
+                engaged |= gap0 + vn * h < 0.0;
                 let rn = r.cross(&cp.normal);
                 let irn = f0.inv_inertia * rn;
                 let w_own = f0.inv_mass + rn.dot(&irn);
@@ -366,10 +363,10 @@ pub(crate) fn solve_body(
                 };
                 k += 1;
             }
-            landing_limits[s] = match (engaged, set.partner, set.points.len()) {
-                (false, _, _) => f32::INFINITY,
-                (true, None, 1) => p.landing_speed.max(first_touch),
-                (true, _, _) => p.landing_speed,
+            landing_limits[s] = if engaged && !(ball && set.partner.is_none()) {
+                p.landing_speed
+            } else {
+                f32::INFINITY
             };
         }
         for _ in 0..p.impact_iterations {

@@ -26,7 +26,8 @@ pub(super) enum RunStatus {
     Running = 0,
     /// The epoch's last step is committed, or the sink stopped the run: the workers return.
     Done = 1,
-    /// A world panicked or the run stalled (the error is in `SharedRun::error`).
+    /// A world panicked or the run stalled (the error is in `SharedRun::error`), or a worker
+    /// unwound (its panic comes back with its join).
     Failed = 2,
 }
 
