@@ -225,9 +225,9 @@ pub(crate) struct SolveRows {
     offsets: Vec<Vec3>,
     impact: Vec<ImpactRow>,
     position: Vec<PositionRow>,
-    /// Per set, the fastest approach its points may keep in the impact pass (∞ until a point
-    /// of the set would touch within the substep).
-    landing_limits: Vec<f32>,
+    /// Per set, whether the impact pass holds its points to `landing_speed` (a point would
+    /// touch within the substep, and the set is not a ball's static environment).
+    held_sets: Vec<bool>,
     bounced_sets: Vec<bool>,
 }
 
@@ -243,7 +243,7 @@ impl SolveRows {
         fresh(&mut self.offsets, points, Vec3::zeros());
         fresh(&mut self.impact, points, ImpactRow::default());
         fresh(&mut self.position, points, PositionRow::default());
-        fresh(&mut self.landing_limits, sets, f32::INFINITY);
+        fresh(&mut self.held_sets, sets, false);
         fresh(&mut self.bounced_sets, sets, false);
     }
 }
@@ -277,7 +277,7 @@ pub(crate) fn solve_body(
         offsets,
         impact,
         position,
-        landing_limits,
+        held_sets,
         bounced_sets,
     } = rows;
     let rest_threshold = 2.0 * gravity.norm() * h;
@@ -363,17 +363,17 @@ pub(crate) fn solve_body(
                 };
                 k += 1;
             }
-            landing_limits[s] = if engaged && !(ball && set.partner.is_none()) {
-                p.landing_speed
-            } else {
-                f32::INFINITY
-            };
+            held_sets[s] = engaged && !(ball && set.partner.is_none());
         }
         for _ in 0..p.impact_iterations {
             let mut largest_change = 0.0f32;
             let mut k = 0;
             for (s, set) in sets.iter().enumerate() {
-                let limit = landing_limits[s];
+                let limit = if held_sets[s] {
+                    p.landing_speed
+                } else {
+                    f32::INFINITY
+                };
                 for cp in &set.points {
                     let row = &impact[k];
                     // n·(v + ω × r) = n·v + ω·(r × n).

@@ -6,7 +6,7 @@ use super::options::{ThreadedOptions, ThreadedSetup};
 use super::output::{Assembly, FinishedFrame, Output};
 use super::report::ThreadedReport;
 use super::shared::{
-    Finishing, InputLog, RunStatus, SharedRun, ThreadedWorld, UNDELIVERED_WINDOWS,
+    EndOnUnwind, Finishing, InputLog, RunStatus, SharedRun, ThreadedWorld, UNDELIVERED_WINDOWS,
 };
 use crate::exec::control::RunControl;
 use crate::exec::error::ExecError;
@@ -166,7 +166,8 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
     let mut frames = Vec::new();
     let mut delivered = 0u64;
     let mut stopped = false;
-    let stop_on_unwind = StopOnUnwind(&shared);
+    // A panicking sink stops the workers before it unwinds out of the run.
+    let stop_on_unwind = EndOnUnwind::stopping(&shared);
     let poster = shared.clone();
     let mut deliver = |batch: VecDeque<FinishedFrame<M>>| {
         for FinishedFrame {
@@ -345,19 +346,6 @@ impl Pace {
         self.per_poll = (steps * SLOW_POLL.as_secs_f64() / elapsed.as_secs_f64()).ceil() as Step;
         self.at = Instant::now();
         self.committed = committed;
-    }
-}
-
-/// Stops the run if the calling thread leaves it by unwinding (a sink panicked), so the
-/// workers do not go on without it.
-struct StopOnUnwind<'a, M: CellModel + 'static, F: Facade>(&'a SharedRun<M, F>);
-
-impl<M: CellModel + 'static, F: Facade> Drop for StopOnUnwind<'_, M, F> {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            self.0.stop.store(1);
-            self.0.set_status(RunStatus::Done);
-        }
     }
 }
 

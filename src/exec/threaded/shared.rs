@@ -160,6 +160,46 @@ pub(super) struct InputLog<S> {
     pub(super) posted: Vec<Message<S>>,
 }
 
+/// Ends the run if the thread holding it leaves by unwinding, so that no other thread waits
+/// for it: the calling thread when the sink panics ([`EndOnUnwind::stopping`]), a worker
+/// when a panic escapes the computations whose panics are caught ([`EndOnUnwind::failing`]:
+/// a kernel bug, or a model's `Clone` or `Drop` of a state or event).
+pub(super) struct EndOnUnwind<'a, M: CellModel + 'static, F: Facade> {
+    run: &'a SharedRun<M, F>,
+    ending: RunStatus,
+}
+
+impl<'a, M: CellModel + 'static, F: Facade> EndOnUnwind<'a, M, F> {
+    /// Stops the run (the workers return, unfinished frames are dropped): the panic goes on
+    /// unwinding out of the run.
+    pub(super) fn stopping(run: &'a SharedRun<M, F>) -> Self {
+        EndOnUnwind {
+            run,
+            ending: RunStatus::Done,
+        }
+    }
+
+    /// Fails the run: the panic's message reaches the caller through the thread's join
+    /// ([`ExecError::Thread`]).
+    pub(super) fn failing(run: &'a SharedRun<M, F>) -> Self {
+        EndOnUnwind {
+            run,
+            ending: RunStatus::Failed,
+        }
+    }
+}
+
+impl<M: CellModel + 'static, F: Facade> Drop for EndOnUnwind<'_, M, F> {
+    fn drop(&mut self) {
+        if std::thread::panicking() {
+            if self.ending == RunStatus::Done {
+                self.run.stop.store(1);
+            }
+            self.run.set_status(self.ending);
+        }
+    }
+}
+
 impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
     /// The run's status now.
     pub(super) fn status(&self) -> RunStatus {

@@ -3,7 +3,7 @@
 //! route the output, publish its bound) and takes part in GVT rounds between turns.
 
 use super::report::ThreadTimes;
-use super::shared::{RunStatus, SharedRun, ThreadedWorld};
+use super::shared::{EndOnUnwind, RunStatus, SharedRun, ThreadedWorld};
 use crate::exec::clock::thread_cpu_seconds;
 use crate::exec::error::ExecError;
 use crate::exec::sync::{panic_message, Facade, FacadeAtomic, FacadeMutex};
@@ -18,24 +18,9 @@ use std::time::Instant;
 /// has stalled (a kernel bug) rather than waiting for ever.
 const STALL_CHECK_SPINS: u32 = 20_000;
 
-/// Fails the run if a worker leaves its loop by unwinding: a panic outside the computations
-/// whose panics are caught (a kernel bug, or a model's `Clone` or `Drop` of a state or
-/// event) would otherwise leave the other threads and the output stage waiting for the
-/// dead worker's worlds for ever. The panic's message reaches the caller through the
-/// thread's join ([`ExecError::Thread`]).
-struct FailOnUnwind<'a, M: CellModel + 'static, F: Facade>(&'a SharedRun<M, F>);
-
-impl<M: CellModel + 'static, F: Facade> Drop for FailOnUnwind<'_, M, F> {
-    fn drop(&mut self) {
-        if std::thread::panicking() {
-            self.0.set_status(RunStatus::Failed);
-        }
-    }
-}
-
 impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
     pub(super) fn worker_loop(&self, me: usize) {
-        let _fail_on_unwind = FailOnUnwind(self);
+        let _fail_on_unwind = EndOnUnwind::failing(self);
         let mut times = ThreadTimes::default();
         let mut spins = 0u32;
         while self.status() == RunStatus::Running {
