@@ -5,6 +5,8 @@ mod body;
 mod contact;
 mod environment;
 mod event;
+mod frame;
+mod friction;
 pub mod metrics;
 mod model;
 mod pair;

@@ -13,6 +13,10 @@ pub struct SolverParams {
     /// Sequential-impulse iterations of the plastic impact pass per substep (0 turns it
     /// off): over all of the body's points, each stopping the approach its gap allows.
     pub impact_iterations: u32,
+    /// Most sequential-impulse sweeps of the velocity pass per substep (normal and Coulomb
+    /// friction at every point that pushed); it stops earlier once no point's velocity
+    /// changes by more than 0.1 mm/s.
+    pub velocity_iterations: u32,
     /// Fastest approach, m/s, of the other points of a partner's manifold once one of its
     /// points touches within a substep (a tilted face lands as a face, not corner first).
     /// A ball against the static environment is not held back (SPEC.md §5.3).
@@ -61,6 +65,7 @@ impl Default for SolverParams {
             substeps: 2,
             sweeps: 2,
             impact_iterations: 8,
+            velocity_iterations: 8,
             landing_speed: 0.3,
             relaxation: 1.0,
             margin: 0.02,

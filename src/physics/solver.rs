@@ -11,6 +11,8 @@
 use super::body::Body;
 use super::body::Shape;
 use super::contact::{ContactPoint, ContactSet, SetRole};
+use super::frame::Frame;
+use super::friction::{coulomb, Tangent, Traction};
 use super::params::SolverParams;
 use crate::math::{Quat, Vec3};
 use nalgebra::{Matrix3, Quaternion};
@@ -25,27 +27,27 @@ pub(crate) fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
     Quat::new_normalize(q.quaternion() + dq)
 }
 
-/// The frame of one pass: the orientation's matrix and the world inverse inertia.
-struct Frame {
-    rot: Matrix3<f32>,
-    inv_inertia: Matrix3<f32>,
-    inv_mass: f32,
-}
-
-impl Frame {
-    fn new(body: &Body, q: &Quat) -> Frame {
-        Frame {
-            rot: q.to_rotation_matrix().into_inner(),
-            inv_inertia: body.world_inv_inertia(q),
-            inv_mass: body.inv_mass(),
-        }
-    }
-
-    /// Generalised inverse mass for a unit impulse along `n` at offset `r`.
-    fn inv_mass_at(&self, r: &Vec3, n: &Vec3) -> f32 {
-        let rn = r.cross(n);
-        self.inv_mass + rn.dot(&(self.inv_inertia * rn))
-    }
+/// One point's row of the velocity pass, for a substep (at the corrected pose).
+#[derive(Clone, Copy, Default)]
+struct VelocityRow {
+    /// Normal impulse of the substep before this pass (impact, restitution, position
+    /// impulse / h); the point takes part only if it is positive.
+    pushed: f32,
+    /// `r × n`.
+    rn: Vec3,
+    /// `I⁻¹ (r × n)`.
+    irn: Vec3,
+    /// Generalised inverse mass along the normal, the partner's included.
+    w: f32,
+    /// The tangent plane (unused in a carried set).
+    tangent: Tangent,
+    /// Normal impulse accumulated by this pass (negative where a separation is capped).
+    normal: f32,
+    /// Tangential impulse accumulated by this pass.
+    friction: Traction,
+    /// The change of the partner point's normal velocity that the point's normal impulses
+    /// imply (its share): the partner applies it in its own solve.
+    partner_vn: f32,
 }
 
 /// Per-point scratch kept across one substep.
@@ -151,7 +153,7 @@ fn cancelling_spin(body: &Body, q: &Quat, w: &Vec3, dw: &Vec3, allowance: f32) -
 /// the impulse is shortened by two ulps, and if even that crosses, dropped.
 fn torsional_impulse(f: &Frame, w: &Vec3, n: &Vec3, cap: f32) -> Vec3 {
     let spin = w.dot(n);
-    let i_n = f.inv_inertia * n;
+    let i_n = f.spin(n);
     let k = n.dot(&i_n);
     if spin == 0.0 || k <= 0.0 || cap <= 0.0 {
         return Vec3::zeros();
@@ -211,12 +213,6 @@ fn pile_share(mobility: f32, w_own: f32, w_partner: f32) -> f32 {
     }
 }
 
-/// Applies impulse `imp` at offset `r` to the velocities `v`, `w`.
-fn apply_impulse(f: &Frame, v: &mut Vec3, w: &mut Vec3, r: &Vec3, imp: &Vec3) {
-    *v += imp * f.inv_mass;
-    *w += f.inv_inertia * r.cross(imp);
-}
-
 /// The per-point and per-set rows of one body's solve, kept between solves so a cell's
 /// bodies reuse one allocation (a solve starts them afresh: `reset`).
 #[derive(Default)]
@@ -225,6 +221,7 @@ pub(crate) struct SolveRows {
     offsets: Vec<Vec3>,
     impact: Vec<ImpactRow>,
     position: Vec<PositionRow>,
+    velocity: Vec<VelocityRow>,
     /// Per set, whether the impact pass holds its points to `landing_speed` (a point would
     /// touch within the substep, and the set is not a ball's static environment).
     held_sets: Vec<bool>,
@@ -243,6 +240,7 @@ impl SolveRows {
         fresh(&mut self.offsets, points, Vec3::zeros());
         fresh(&mut self.impact, points, ImpactRow::default());
         fresh(&mut self.position, points, PositionRow::default());
+        fresh(&mut self.velocity, points, VelocityRow::default());
         fresh(&mut self.held_sets, sets, false);
         fresh(&mut self.bounced_sets, sets, false);
     }
@@ -277,6 +275,7 @@ pub(crate) fn solve_body(
         offsets,
         impact,
         position,
+        velocity,
         held_sets,
         bounced_sets,
     } = rows;
@@ -340,7 +339,7 @@ pub(crate) fn solve_body(
                 let vn = cp.normal.dot(&(b.linvel + b.angvel.cross(&r)));
                 engaged |= gap0 + vn * h < 0.0;
                 let rn = r.cross(&cp.normal);
-                let irn = f0.inv_inertia * rn;
+                let irn = f0.spin(&rn);
                 let w_own = f0.inv_mass + rn.dot(&irn);
                 let pile = set.role == SetRole::Pile;
                 let w = if pile {
@@ -497,7 +496,7 @@ pub(crate) fn solve_body(
             for (m, cp) in set.points.iter().enumerate() {
                 let r0 = offset(&b, &fp.rot, cp);
                 let rn = r0.cross(&cp.normal);
-                let irn = fp.inv_inertia * rn;
+                let irn = fp.spin(&rn);
                 let pj = cp.partner_point + cp.partner_velocity * h;
                 position[k + m] = PositionRow {
                     offset: r0,
@@ -591,61 +590,124 @@ pub(crate) fn solve_body(
         }
 
         // Velocity pass: per point that pushed in this substep, remove approach velocity
-        // (or reflect it with the restitution) and apply Coulomb friction bounded by the
-        // point's normal impulse.
+        // (or keep restitution's separation) and apply Coulomb friction within `μ` times the
+        // point's whole normal impulse of the substep, this pass's included: sequential
+        // impulses over the points, repeated (at most `velocity_iterations` sweeps) until no
+        // point's velocity changes by more than 0.1 mm/s. (One sweep with friction bounded
+        // without this pass's normal impulses, which balance friction's tipping moment,
+        // braked a sliding cube at 0.8 μg, turned it and let a box on a 35° slope slide 35 %
+        // too fast.) Each point carries a virtual partner that takes its share of the
+        // point's impulses (by the partner's inverse mass), so the sweeps leave the body its
+        // share of the pair's change, as a single application does.
+        //
+        // Friction acts as if before the substep's motion: its change of linear velocity also
+        // moves the body by `h·Δv`, so a box on a slope that holds it stays where it is
+        // (applied only after the motion, it crept `g·sin θ·h²` down every substep: 8.6 mm/s
+        // on 3° with one substep).
         let f1 = Frame::new(&b, &q1);
+        let mut any = false;
         let mut k = 0;
-        for (s, set) in sets.iter().enumerate() {
+        for set in sets {
             for cp in &set.points {
                 let sc = scratch[k];
+                let pushed = sc.impulse + sc.bounce + sc.lambda / h;
+                velocity[k] = if pushed > 0.0 {
+                    any = true;
+                    let r = offset(&b, &f1.rot, cp);
+                    let rn = r.cross(&cp.normal);
+                    let irn = f1.spin(&rn);
+                    let w_own = f1.inv_mass + rn.dot(&irn);
+                    VelocityRow {
+                        pushed,
+                        rn,
+                        irn,
+                        w: w_own + cp.partner_inv_mass,
+                        tangent: if set.role == SetRole::Carried {
+                            Tangent::default()
+                        } else {
+                            Tangent::new(&f1, &r, &cp.normal, cp.partner_inv_mass)
+                        },
+                        ..VelocityRow::default()
+                    }
+                } else {
+                    VelocityRow::default()
+                };
                 k += 1;
-                let normal_impulse = sc.impulse + sc.bounce + sc.lambda / h;
-                if normal_impulse <= 0.0 {
+            }
+        }
+        let mut friction_dv = Vec3::zeros();
+        for _ in 0..if any { p.velocity_iterations } else { 0 } {
+            let mut largest_change = 0.0f32;
+            let mut k = 0;
+            for (s, set) in sets.iter().enumerate() {
+                let carried = set.role == SetRole::Carried;
+                // Only an approach is removed in a set that bounced (restitution's separation
+                // is kept) or is carried; elsewhere depenetration must not fling bodies, and
+                // a separating speed above `max_separation_speed` is removed too.
+                let capped = !bounced_sets[s] && !carried;
+                for cp in &set.points {
+                    let row = &mut velocity[k];
+                    k += 1;
+                    if row.pushed <= 0.0 {
+                        continue;
+                    }
+                    let wj = cp.partner_inv_mass;
+                    let vn = cp.normal.dot(&(b.linvel - cp.partner_velocity))
+                        + b.angvel.dot(&row.rn)
+                        - row.partner_vn;
+                    let target = if vn < 0.0 {
+                        0.0
+                    } else if capped {
+                        vn.min(p.max_separation_speed)
+                    } else {
+                        vn
+                    };
+                    // The point's normal impulse over the substep stays ≥ 0: a separation is
+                    // removed only as far as the point pushed (no adhesion), and where only
+                    // an approach is removed, this pass only pushes.
+                    let floor = if capped { -row.pushed } else { 0.0 };
+                    let next = (row.normal + (target - vn) / row.w).max(floor);
+                    if next != row.normal {
+                        let d = next - row.normal;
+                        b.linvel += cp.normal * (d * f1.inv_mass);
+                        b.angvel += row.irn * d;
+                        row.partner_vn -= d * wj;
+                        row.normal = next;
+                        largest_change = largest_change.max(d.abs() * row.w);
+                    }
+                    if carried {
+                        continue;
+                    }
+                    let bound = set.friction * (row.pushed + row.normal).max(0.0);
+                    let before = b.linvel;
+                    let change = coulomb(
+                        &row.tangent,
+                        f1.inv_mass,
+                        &mut b,
+                        &cp.partner_velocity,
+                        bound,
+                        &mut row.friction,
+                    );
+                    friction_dv += b.linvel - before;
+                    largest_change = largest_change.max(change);
+                }
+            }
+            if largest_change < IMPACT_TOLERANCE {
+                break;
+            }
+        }
+        b.position += friction_dv * h;
+        // Torsional friction, once the point's normal impulse is known.
+        let mut k = 0;
+        for set in sets {
+            for cp in &set.points {
+                let row = &velocity[k];
+                k += 1;
+                if row.pushed <= 0.0 || set.role == SetRole::Carried {
                     continue;
                 }
-                let r = offset(&b, &f1.rot, cp);
-                let vrel = b.linvel + b.angvel.cross(&r) - cp.partner_velocity;
-                let vn = cp.normal.dot(&vrel);
-                let vt = vrel - cp.normal * vn;
-                let mut dv = Vec3::zeros();
-                // Plastic: an approach left after the impact pass and the correction is
-                // stopped. A set that bounced keeps its separation (restitution's).
-                if vn < 0.0 {
-                    dv += cp.normal * -vn;
-                } else if !bounced_sets[s]
-                    && vn > p.max_separation_speed
-                    && set.role != SetRole::Carried
-                {
-                    // Depenetration must not fling bodies: the separating speed a position
-                    // correction produced is capped (the whole excess is removed on i's side).
-                    let excess = vn - p.max_separation_speed;
-                    let w_i = f1.inv_mass_at(&r, &cp.normal);
-                    let imp = -cp.normal * (excess / w_i);
-                    apply_impulse(&f1, &mut b.linvel, &mut b.angvel, &r, &imp);
-                }
-                let vt_len = vt.norm();
-                if vt_len > 0.0 && set.role != SetRole::Carried {
-                    let cap = set.friction * normal_impulse;
-                    let w_t = f1.inv_mass_at(&r, &(vt / vt_len));
-                    let wt_total = w_t + cp.partner_inv_mass;
-                    // Velocity change that would stop slip, limited by the friction cone.
-                    let limit = cap * wt_total;
-                    dv -= vt / vt_len * vt_len.min(limit);
-                }
-                // A change whose squared length underflows (subnormal components) has no
-                // direction: normalising it gave 0/0 = NaN (issue 23). Its length is then 0
-                // to f32 precision and it is skipped.
-                let dir_len = dv.norm();
-                if dir_len > 0.0 {
-                    let dir = dv / dir_len;
-                    let w = f1.inv_mass_at(&r, &dir) + cp.partner_inv_mass;
-                    let imp = dir * (dir_len / w);
-                    apply_impulse(&f1, &mut b.linvel, &mut b.angvel, &r, &imp);
-                }
-                if set.role != SetRole::Carried {
-                    let cap = set.friction * normal_impulse * p.patch_radius;
-                    b.angvel -= torsional_impulse(&f1, &b.angvel, &cp.normal, cap);
-                }
+                let bound = set.friction * (row.pushed + row.normal).max(0.0);
+                b.angvel -= torsional_impulse(&f1, &b.angvel, &cp.normal, bound * p.patch_radius);
             }
         }
     }

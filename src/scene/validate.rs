@@ -144,6 +144,13 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
             "must be between 0 (no impact pass) and 100",
         ));
     }
+    if !(1..=100).contains(&s.velocity_iterations) {
+        return Err(c.fail(
+            "solver.velocity_iterations",
+            s.velocity_iterations,
+            "must be between 1 and 100",
+        ));
+    }
     c.range(
         "solver.landing_speed",
         s.landing_speed,

@@ -1,0 +1,164 @@
+//! Coulomb friction at one contact point of a body's solve (SPEC.md §5.3): the point's
+//! tangent plane, fixed for a pass, and one sequential-impulse update of the tangential
+//! impulse within the friction cone.
+//!
+//! The impulse opposes the point's slip relative to its partner (Coulomb's law: friction
+//! opposes the sliding velocity), with the magnitude that would stop the slip, and the
+//! impulse accumulated over the substep stays within `μ·N`. Updates are cheap once the row is
+//! built: the slip and the body's response are dot products with precomputed vectors.
+
+use super::body::Body;
+use super::frame::Frame;
+use crate::math::Vec3;
+
+/// Two unit tangents completing `n` to a right-handed orthonormal basis; a function of `n`
+/// alone, so the passes of a substep share the coordinates of a point's tangent plane.
+fn tangents(n: &Vec3) -> [Vec3; 2] {
+    let t1 = if n.x.abs() > 0.577_350_3 {
+        Vec3::new(n.y, -n.x, 0.0)
+    } else {
+        Vec3::new(0.0, n.z, -n.y)
+    }
+    .normalize();
+    [t1, n.cross(&t1)]
+}
+
+/// A contact point's tangent plane for one pass of the solve: the tangents, their angular
+/// parts, and the tangential inverse-mass matrix (a 2×2 symmetric matrix).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Tangent {
+    /// The two tangents.
+    t: [Vec3; 2],
+    /// `r × t_a`: the angular part of each tangent at offset `r`.
+    rt: [Vec3; 2],
+    /// `I⁻¹ (r × t_a)`: the spin a unit impulse along `t_a` adds.
+    irt: [Vec3; 2],
+    /// `K_ab = t_a·K·t_b` with `K` the point's inverse-mass matrix, the partner's isotropic
+    /// share (`partner_inv_mass`) on the diagonal: `[K_11, K_12, K_22]`.
+    k: [f32; 3],
+    /// The partner point's inverse mass (0 for an immovable partner).
+    partner_inv_mass: f32,
+}
+
+/// The tangential impulse accumulated at a point over a pass, tangent coordinates, and the
+/// change of the partner point's slip velocity that it implies (the partner's share, which
+/// it applies in its own solve).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Traction {
+    impulse: [f32; 2],
+    partner_slip: [f32; 2],
+}
+
+impl Tangent {
+    /// The tangent plane of a point with normal `n` at offset `r` of a body in frame `f`;
+    /// the partner's point yields with
+    /// inverse mass `partner_inv_mass` (0 for an immovable partner).
+    pub(super) fn new(f: &Frame, r: &Vec3, n: &Vec3, partner_inv_mass: f32) -> Tangent {
+        let t = tangents(n);
+        let rt = [r.cross(&t[0]), r.cross(&t[1])];
+        let irt = [f.spin(&rt[0]), f.spin(&rt[1])];
+        let diagonal = f.inv_mass + partner_inv_mass;
+        Tangent {
+            t,
+            rt,
+            irt,
+            k: [
+                diagonal + rt[0].dot(&irt[0]),
+                rt[0].dot(&irt[1]),
+                diagonal + rt[1].dot(&irt[1]),
+            ],
+            partner_inv_mass,
+        }
+    }
+
+    /// The slip of the point relative to a partner point moving at `partner_velocity`, in
+    /// tangent coordinates.
+    fn slip(&self, linvel: &Vec3, angvel: &Vec3, partner_velocity: &Vec3) -> [f32; 2] {
+        let v = linvel - partner_velocity;
+        [
+            self.t[0].dot(&v) + angvel.dot(&self.rt[0]),
+            self.t[1].dot(&v) + angvel.dot(&self.rt[1]),
+        ]
+    }
+}
+
+/// One sequential-impulse update of Coulomb friction at a point with tangent plane `row`:
+/// the tangential impulse accumulated in `acc` moves by the impulse along the slip
+/// (relative to the partner point, moving at `partner_velocity` plus its share of `acc`)
+/// that stops it, and is kept within `cap` (`μ` times the point's normal impulse so far; an
+/// accumulated impulse beyond a smaller cap is shortened). The change is applied to `b`'s
+/// velocities. Returns how much the point's velocity changed, m/s.
+pub(super) fn coulomb(
+    row: &Tangent,
+    inv_mass: f32,
+    b: &mut Body,
+    partner_velocity: &Vec3,
+    cap: f32,
+    acc: &mut Traction,
+) -> f32 {
+    if cap <= 0.0 && acc.impulse == [0.0; 2] {
+        return 0.0;
+    }
+    let own = row.slip(&b.linvel, &b.angvel, partner_velocity);
+    let s = [own[0] - acc.partner_slip[0], own[1] - acc.partner_slip[1]];
+    let slip_sq = s[0] * s[0] + s[1] * s[1];
+    let mut next = acc.impulse;
+    let mut w = row.k[0];
+    // A slip whose squared length underflows (subnormal components) has no direction
+    // (issue 23): then only the bound is enforced.
+    if slip_sq > 0.0 {
+        let len = slip_sq.sqrt();
+        let d = [s[0] / len, s[1] / len];
+        // The generalised inverse mass along the slip: `dᵀ K d`.
+        w = d[0] * d[0] * row.k[0] + 2.0 * d[0] * d[1] * row.k[1] + d[1] * d[1] * row.k[2];
+        let stop = len / w;
+        next = [next[0] - d[0] * stop, next[1] - d[1] * stop];
+    }
+    let cap = cap.max(0.0);
+    let len_sq = next[0] * next[0] + next[1] * next[1];
+    if len_sq > cap * cap {
+        let scale = cap / len_sq.sqrt();
+        next = [next[0] * scale, next[1] * scale];
+    }
+    let d = [next[0] - acc.impulse[0], next[1] - acc.impulse[1]];
+    if d == [0.0; 2] {
+        return 0.0;
+    }
+    let impulse = row.t[0] * d[0] + row.t[1] * d[1];
+    b.linvel += impulse * inv_mass;
+    b.angvel += row.irt[0] * d[0] + row.irt[1] * d[1];
+    let wj = row.partner_inv_mass;
+    acc.partner_slip = [
+        acc.partner_slip[0] - d[0] * wj,
+        acc.partner_slip[1] - d[1] * wj,
+    ];
+    acc.impulse = next;
+    (d[0] * d[0] + d[1] * d[1]).sqrt() * w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_tangents_complete_any_normal_to_an_orthonormal_basis() {
+        for n in [
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -1.0),
+            Vec3::new(0.6, -0.48, 0.64),
+            Vec3::new(-0.577, 0.577, 0.5783),
+        ] {
+            let n = n.normalize();
+            let [t1, t2] = tangents(&n);
+            for (a, b) in [(t1, t2), (t1, n), (t2, n)] {
+                assert!(a.dot(&b).abs() < 1e-6, "{a:?} · {b:?} for n = {n:?}");
+            }
+            assert!((t1.norm() - 1.0).abs() < 1e-6 && (t2.norm() - 1.0).abs() < 1e-6);
+            assert!(
+                (t1.cross(&t2) - n).norm() < 1e-6,
+                "left-handed for n = {n:?}"
+            );
+        }
+    }
+}
