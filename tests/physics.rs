@@ -419,6 +419,20 @@ fn bad_impact_parameters_are_rejected_naming_the_field() {
             },
             "solver.impact_iterations",
         ),
+        (
+            soda::physics::SolverParams {
+                velocity_iterations: 0,
+                ..Default::default()
+            },
+            "solver.velocity_iterations",
+        ),
+        (
+            soda::physics::SolverParams {
+                velocity_iterations: 101,
+                ..Default::default()
+            },
+            "solver.velocity_iterations",
+        ),
     ];
     for (params, field) in cases {
         let err = build(params)

@@ -12,7 +12,7 @@ use super::frame::Frame;
 use crate::math::Vec3;
 
 /// Two unit tangents completing `n` to a right-handed orthonormal basis; a function of `n`
-/// alone, so the passes of a substep share the coordinates of a point's tangent plane.
+/// alone, so the basis does not depend on the body's pose or on the order of the points.
 fn tangents(n: &Vec3) -> [Vec3; 2] {
     let t1 = if n.x.abs() > 0.577_350_3 {
         Vec3::new(n.y, -n.x, 0.0)
@@ -33,8 +33,9 @@ pub(super) struct Tangent {
     rt: [Vec3; 2],
     /// `I⁻¹ (r × t_a)`: the spin a unit impulse along `t_a` adds.
     irt: [Vec3; 2],
-    /// `K_ab = t_a·K·t_b` with `K` the point's inverse-mass matrix, the partner's isotropic
-    /// share (`partner_inv_mass`) on the diagonal: `[K_11, K_12, K_22]`.
+    /// `K_ab = t_a·K·t_b` with `K` the point's inverse-mass matrix, the partner's
+    /// `partner_inv_mass` (its generalised inverse mass along the normal, taken for every
+    /// direction) on the diagonal: `[K_11, K_12, K_22]`.
     k: [f32; 3],
     /// The partner point's inverse mass (0 for an immovable partner).
     partner_inv_mass: f32,
@@ -71,6 +72,14 @@ impl Tangent {
         }
     }
 
+    /// `K·x` for a tangential impulse `x`: the change of the point's slip velocity.
+    fn times_k(&self, x: &[f32; 2]) -> [f32; 2] {
+        [
+            self.k[0] * x[0] + self.k[1] * x[1],
+            self.k[1] * x[0] + self.k[2] * x[1],
+        ]
+    }
+
     /// The slip of the point relative to a partner point moving at `partner_velocity`, in
     /// tangent coordinates.
     fn slip(&self, linvel: &Vec3, angvel: &Vec3, partner_velocity: &Vec3) -> [f32; 2] {
@@ -86,8 +95,9 @@ impl Tangent {
 /// the tangential impulse accumulated in `acc` moves by the impulse along the slip
 /// (relative to the partner point, moving at `partner_velocity` plus its share of `acc`)
 /// that stops it, and is kept within `cap` (`μ` times the point's normal impulse so far; an
-/// accumulated impulse beyond a smaller cap is shortened). The change is applied to `b`'s
-/// velocities. Returns how much the point's velocity changed, m/s.
+/// accumulated impulse beyond a smaller cap is shortened; a change shortened onto the cone
+/// never adds energy). The change is applied to `b`'s velocities. Returns how much the
+/// point's slip velocity changed (`|K·Δ|`), m/s.
 pub(super) fn coulomb(
     row: &Tangent,
     inv_mass: f32,
@@ -103,27 +113,48 @@ pub(super) fn coulomb(
     let s = [own[0] - acc.partner_slip[0], own[1] - acc.partner_slip[1]];
     let slip_sq = s[0] * s[0] + s[1] * s[1];
     let mut next = acc.impulse;
-    let mut w = row.k[0];
     // A slip whose squared length underflows (subnormal components) has no direction
     // (issue 23): then only the bound is enforced.
     if slip_sq > 0.0 {
         let len = slip_sq.sqrt();
         let d = [s[0] / len, s[1] / len];
         // The generalised inverse mass along the slip: `dᵀ K d`.
-        w = d[0] * d[0] * row.k[0] + 2.0 * d[0] * d[1] * row.k[1] + d[1] * d[1] * row.k[2];
-        let stop = len / w;
+        let kd = row.times_k(&d);
+        let stop = len / (d[0] * kd[0] + d[1] * kd[1]);
         next = [next[0] - d[0] * stop, next[1] - d[1] * stop];
     }
     let cap = cap.max(0.0);
     let len_sq = next[0] * next[0] + next[1] * next[1];
-    if len_sq > cap * cap {
+    let mut d = if len_sq > cap * cap {
         let scale = cap / len_sq.sqrt();
         next = [next[0] * scale, next[1] * scale];
-    }
-    let d = [next[0] - acc.impulse[0], next[1] - acc.impulse[1]];
+        let d = [next[0] - acc.impulse[0], next[1] - acc.impulse[1]];
+        // Shortened onto the cone, the change is no longer along the slip, and where `K`
+        // is anisotropic it could add energy: `ΔE = s·Δ + ½ΔᵀKΔ`. Then (if the impulse held
+        // so far is within the cone, so that a shorter change stays within it) it is
+        // scaled to the most dissipative length along its direction, `−s·Δ / ΔᵀKΔ`.
+        let held = acc.impulse[0] * acc.impulse[0] + acc.impulse[1] * acc.impulse[1];
+        let along = s[0] * d[0] + s[1] * d[1];
+        let kd = row.times_k(&d);
+        let curvature = d[0] * kd[0] + d[1] * kd[1];
+        if held <= cap * cap && along + 0.5 * curvature > 0.0 {
+            let scale = if along < 0.0 && curvature > 0.0 {
+                -along / curvature
+            } else {
+                0.0
+            };
+            [d[0] * scale, d[1] * scale]
+        } else {
+            d
+        }
+    } else {
+        [next[0] - acc.impulse[0], next[1] - acc.impulse[1]]
+    };
     if d == [0.0; 2] {
         return 0.0;
     }
+    next = [acc.impulse[0] + d[0], acc.impulse[1] + d[1]];
+    d = [next[0] - acc.impulse[0], next[1] - acc.impulse[1]];
     let impulse = row.t[0] * d[0] + row.t[1] * d[1];
     b.linvel += impulse * inv_mass;
     b.angvel += row.irt[0] * d[0] + row.irt[1] * d[1];
@@ -133,7 +164,9 @@ pub(super) fn coulomb(
         acc.partner_slip[1] - d[1] * wj,
     ];
     acc.impulse = next;
-    (d[0] * d[0] + d[1] * d[1]).sqrt() * w
+    // The change of the point's slip velocity, `K·Δ`.
+    let kd = row.times_k(&d);
+    (kd[0] * kd[0] + kd[1] * kd[1]).sqrt()
 }
 
 #[cfg(test)]
