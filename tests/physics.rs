@@ -388,8 +388,8 @@ fn energy_growth_of_a_mixed_pile_is_bounded_by_the_separation_allowance() {
     assert_energy_never_grows("dense-pile", scene, 300, allowance + 1e-3);
 }
 
-/// The impact-pass parameters are validated like every solver value: the error names the
-/// field and the value.
+/// The impact- and velocity-pass parameters are validated like every solver value: the error
+/// names the field and the value.
 #[test]
 fn bad_impact_parameters_are_rejected_naming_the_field() {
     let build = |params: soda::physics::SolverParams| {
@@ -397,44 +397,21 @@ fn bad_impact_parameters_are_rejected_naming_the_field() {
         b.body(unit_cube(), Material::default(), [0.0, 1.0, 0.0], [0.0; 3]);
         b.build()
     };
-    let cases = [
+    // Each case sets one field of the defaults to a bad value.
+    type Set = fn(&mut soda::physics::SolverParams);
+    let cases: [(Set, &str); 5] = [
+        (|p| p.landing_speed = f32::NAN, "solver.landing_speed"),
+        (|p| p.landing_speed = -1.0, "solver.landing_speed"),
+        (|p| p.impact_iterations = 1000, "solver.impact_iterations"),
+        (|p| p.velocity_iterations = 0, "solver.velocity_iterations"),
         (
-            soda::physics::SolverParams {
-                landing_speed: f32::NAN,
-                ..Default::default()
-            },
-            "solver.landing_speed",
-        ),
-        (
-            soda::physics::SolverParams {
-                landing_speed: -1.0,
-                ..Default::default()
-            },
-            "solver.landing_speed",
-        ),
-        (
-            soda::physics::SolverParams {
-                impact_iterations: 1000,
-                ..Default::default()
-            },
-            "solver.impact_iterations",
-        ),
-        (
-            soda::physics::SolverParams {
-                velocity_iterations: 0,
-                ..Default::default()
-            },
-            "solver.velocity_iterations",
-        ),
-        (
-            soda::physics::SolverParams {
-                velocity_iterations: 101,
-                ..Default::default()
-            },
+            |p| p.velocity_iterations = 101,
             "solver.velocity_iterations",
         ),
     ];
-    for (params, field) in cases {
+    for (set, field) in cases {
+        let mut params = soda::physics::SolverParams::default();
+        set(&mut params);
         let err = build(params)
             .expect_err("bad solver value accepted")
             .to_string();

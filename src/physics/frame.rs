@@ -10,7 +10,7 @@ pub(super) struct Frame {
     /// The orientation as a rotation matrix.
     pub(super) rot: Matrix3<f32>,
     /// The world inverse inertia `R · diag(I⁻¹) · Rᵀ`.
-    pub(super) inv_inertia: Matrix3<f32>,
+    inv_inertia: Matrix3<f32>,
     /// Inverse mass, 1/kg.
     pub(super) inv_mass: f32,
 }

@@ -39,6 +39,8 @@ pub(super) struct Tangent {
     k: [f32; 3],
     /// The partner point's inverse mass (0 for an immovable partner).
     partner_inv_mass: f32,
+    /// The body's inverse mass.
+    inv_mass: f32,
 }
 
 /// The tangential impulse accumulated at a point over a pass, tangent coordinates, and the
@@ -48,6 +50,13 @@ pub(super) struct Tangent {
 pub(super) struct Traction {
     impulse: [f32; 2],
     partner_slip: [f32; 2],
+}
+
+impl Traction {
+    /// The tangential impulse accumulated so far, tangent coordinates.
+    pub(super) fn impulse(&self) -> [f32; 2] {
+        self.impulse
+    }
 }
 
 impl Tangent {
@@ -69,7 +78,18 @@ impl Tangent {
                 diagonal + rt[1].dot(&irt[1]),
             ],
             partner_inv_mass,
+            inv_mass: f.inv_mass,
         }
+    }
+
+    /// The world vector of a tangential impulse `x` given in tangent coordinates.
+    pub(super) fn world(&self, x: &[f32; 2]) -> Vec3 {
+        self.t[0] * x[0] + self.t[1] * x[1]
+    }
+
+    /// The change of the body's linear velocity that tangential impulse `x` makes.
+    pub(super) fn linear_change(&self, x: &[f32; 2]) -> Vec3 {
+        self.world(x) * self.inv_mass
     }
 
     /// `K·x` for a tangential impulse `x`: the change of the point's slip velocity.
@@ -100,7 +120,6 @@ impl Tangent {
 /// point's slip velocity changed (`|K·Δ|`), m/s.
 pub(super) fn coulomb(
     row: &Tangent,
-    inv_mass: f32,
     b: &mut Body,
     partner_velocity: &Vec3,
     cap: f32,
@@ -125,10 +144,12 @@ pub(super) fn coulomb(
     }
     let cap = cap.max(0.0);
     let len_sq = next[0] * next[0] + next[1] * next[1];
-    let mut d = if len_sq > cap * cap {
+    let d = if len_sq > cap * cap {
         let scale = cap / len_sq.sqrt();
-        next = [next[0] * scale, next[1] * scale];
-        let d = [next[0] - acc.impulse[0], next[1] - acc.impulse[1]];
+        let d = [
+            next[0] * scale - acc.impulse[0],
+            next[1] * scale - acc.impulse[1],
+        ];
         // Shortened onto the cone, the change is no longer along the slip, and where `K`
         // is anisotropic it could add energy: `ΔE = s·Δ + ½ΔᵀKΔ`. Then (if the impulse held
         // so far is within the cone, so that a shorter change stays within it) it is
@@ -153,17 +174,14 @@ pub(super) fn coulomb(
     if d == [0.0; 2] {
         return 0.0;
     }
-    next = [acc.impulse[0] + d[0], acc.impulse[1] + d[1]];
-    d = [next[0] - acc.impulse[0], next[1] - acc.impulse[1]];
-    let impulse = row.t[0] * d[0] + row.t[1] * d[1];
-    b.linvel += impulse * inv_mass;
+    b.linvel += row.linear_change(&d);
     b.angvel += row.irt[0] * d[0] + row.irt[1] * d[1];
     let wj = row.partner_inv_mass;
     acc.partner_slip = [
         acc.partner_slip[0] - d[0] * wj,
         acc.partner_slip[1] - d[1] * wj,
     ];
-    acc.impulse = next;
+    acc.impulse = [acc.impulse[0] + d[0], acc.impulse[1] + d[1]];
     // The change of the point's slip velocity, `K·Δ`.
     let kd = row.times_k(&d);
     (kd[0] * kd[0] + kd[1] * kd[1]).sqrt()

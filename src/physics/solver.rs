@@ -51,6 +51,13 @@ struct VelocityRow {
     partner_vn: f32,
 }
 
+impl VelocityRow {
+    /// The point's whole normal impulse of the substep so far, `≥ 0`.
+    fn normal_impulse(&self) -> f32 {
+        (self.pushed + self.normal).max(0.0)
+    }
+}
+
 /// Per-point scratch kept across one substep.
 #[derive(Clone, Copy, Default)]
 struct PointScratch {
@@ -600,11 +607,7 @@ pub(crate) fn solve_body(
         // too fast.) Each point carries a virtual partner that takes its share of the
         // point's impulses (by the partner's inverse mass), so the sweeps leave the body its
         // share of the pair's change, as a single application does.
-        //
-        // Friction acts as if before the substep's motion: its change of linear velocity also
-        // moves the body by `h·Δv`, so a box on a slope that holds it stays where it is
-        // (applied only after the motion, it crept `g·sin θ·h²` down every substep: 8.6 mm/s
-        // on 3° with one substep).
+        // Friction then acts as if before the substep's motion (below).
         let f1 = Frame::new(&b, &q1);
         let mut any = false;
         let mut k = 0;
@@ -636,7 +639,6 @@ pub(crate) fn solve_body(
                 k += 1;
             }
         }
-        let mut friction_dv = Vec3::zeros();
         let sweeps = if any { p.velocity_iterations } else { 0 };
         for _ in 0..sweeps {
             let mut largest_change = 0.0f32;
@@ -682,17 +684,14 @@ pub(crate) fn solve_body(
                     if carried {
                         continue;
                     }
-                    let bound = set.friction * (row.pushed + row.normal).max(0.0);
-                    let before = b.linvel;
+                    let bound = set.friction * row.normal_impulse();
                     let change = coulomb(
                         &row.tangent,
-                        f1.inv_mass,
                         &mut b,
                         &cp.partner_velocity,
                         bound,
                         &mut row.friction,
                     );
-                    friction_dv += b.linvel - before;
                     largest_change = largest_change.max(change);
                 }
             }
@@ -700,10 +699,16 @@ pub(crate) fn solve_body(
                 break;
             }
         }
-        // Friction's change of linear velocity as if applied before the motion: only its
-        // part against the substep's own motion, at most all of it (a retreat along the path
-        // the body just moved; moved by the whole `h·Δv_f`, bodies in piles were pushed into
-        // their neighbours and piles of balls gained up to 0.26 J after landing).
+        // Friction's change of linear velocity `Δv_f` as if applied before the motion: only
+        // its part against the substep's own motion, at most all of it (a retreat along the
+        // path the body just moved), so a box on a slope that holds it stays where it is
+        // (applied only after the motion, it crept `g·sin θ·h²` down every substep: 8.6
+        // mm/s on 3° with one substep; moved by the whole `h·Δv_f`, bodies in piles were
+        // pushed into their neighbours and piles of balls gained up to 0.26 J after landing).
+        let friction_dv: Vec3 = velocity
+            .iter()
+            .map(|row| row.tangent.linear_change(&row.friction.impulse()))
+            .sum();
         let path = v_pred * h;
         let len_sq = path.norm_squared();
         if len_sq > 0.0 {
@@ -719,7 +724,7 @@ pub(crate) fn solve_body(
                 if row.pushed <= 0.0 || set.role == SetRole::Carried {
                     continue;
                 }
-                let bound = set.friction * (row.pushed + row.normal).max(0.0);
+                let bound = set.friction * row.normal_impulse();
                 b.angvel -= torsional_impulse(&f1, &b.angvel, &cp.normal, bound * p.patch_radius);
             }
         }
