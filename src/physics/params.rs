@@ -65,7 +65,7 @@ impl Default for SolverParams {
             substeps: 2,
             sweeps: 2,
             impact_iterations: 8,
-            velocity_iterations: 8,
+            velocity_iterations: 16,
             landing_speed: 0.3,
             relaxation: 1.0,
             margin: 0.02,
