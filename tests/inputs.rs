@@ -145,7 +145,7 @@ fn bad_input_scripts_are_refused_naming_the_entry_and_field() {
         (
             "velocity = [1.0, 0.0, 0.0]",
             "velocity = [1.0, 0.0, 0.0]\nangular_velocity = [0.0, 1e30, 0.0]",
-            "angular speed must not exceed solver.max_angular_speed = 60",
+            "angular speed must not exceed 60 rad/s for this body: the larger of solver.max_angular_speed = 60",
         ),
         ("id = 5000, shape", "id = 5, shape", "must not be in use"),
         (

@@ -434,3 +434,37 @@ mod never_panics {
         }
     }
 }
+
+/// A body's spin cap grows as it gets smaller (SPEC.md §3): a 5 cm ball may spin at up to
+/// `max_speed / r` = 600 rad/s (rolling at 30 m/s), not only `max_angular_speed` = 60;
+/// a faster one is refused naming the field, the cap and where it comes from.
+#[test]
+fn a_small_ball_may_spin_as_fast_as_it_may_roll() {
+    use soda::physics::{Material, Shape};
+    use soda::scene::BodySpec;
+    let ball = |spin: f32| {
+        soda::SceneBuilder::new([-5.0, -1.0, -5.0], [5.0, 5.0, 5.0])
+            .body_spec(BodySpec {
+                id: 0,
+                shape: Shape::Ball { radius: 0.05 },
+                material: Material {
+                    density: 1.0,
+                    friction: 0.5,
+                    restitution: 0.0,
+                },
+                position: [0.0, 1.0, 0.0],
+                rotation: [0.0; 3],
+                velocity: [0.0; 3],
+                angular_velocity: [0.0, 0.0, spin],
+            })
+            .build()
+    };
+    assert!(ball(590.0).is_ok());
+    let error = ball(610.0).unwrap_err().to_string();
+    assert!(
+        error.contains("angular_velocity")
+            && error.contains("must not exceed 600 rad/s for this body")
+            && error.contains("solver.max_speed / bounding radius = 30 / 0.05 m"),
+        "{error}"
+    );
+}

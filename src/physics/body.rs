@@ -37,6 +37,12 @@ impl Parry {
     }
 }
 
+/// The largest gain of speed in one step, m/s, along the body's direction of motion, that
+/// still counts as coming to rest (SPEC.md §5.4): a body gathering speed faster than this
+/// per step (0.03 m/s² at 60 steps per second) never falls asleep. With 1e-4 m/s (the
+/// velocity pass's tolerance) balls in a settled gas kept creeping awake.
+pub const SPEEDING_UP_TOLERANCE: f32 = 5e-4;
+
 impl Shape {
     /// Radius of the smallest sphere about the centre that holds the shape.
     pub fn bounding_radius(&self) -> f32 {
@@ -257,6 +263,15 @@ impl Body {
     pub fn is_quiet(&self, speed: f32) -> bool {
         self.linvel.norm_squared() <= speed * speed
             && self.angvel.norm() * self.bounding_radius() <= speed
+    }
+
+    /// Whether this state moves faster than `before` (the same body a step earlier) along
+    /// `before`'s direction of motion, by more than [`SPEEDING_UP_TOLERANCE`]: then it is
+    /// not coming to rest (SPEC.md §5.4). A velocity turning back and forth (a ball rocking
+    /// in a groove) does not count; a body at rest a step earlier does not either.
+    pub fn speeds_up_from(&self, before: &Body) -> bool {
+        let then = before.linvel.norm();
+        then > 0.0 && self.linvel.dot(&before.linvel) > then * (then + SPEEDING_UP_TOLERANCE)
     }
 
     /// Whether an input removes this body at the current step ([`LEAVING`]).

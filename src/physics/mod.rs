@@ -12,12 +12,13 @@ mod model;
 mod pair;
 mod params;
 mod props;
+mod rotation;
 mod solver;
 
-pub use body::{Body, Material, Shape, LEAVING};
+pub use body::{Body, Material, Shape, LEAVING, SPEEDING_UP_TOLERANCE};
 pub use contact::{ContactPoint, ContactSet, SetRole};
 pub use environment::{DomainBox, Environment, Plane, StaticCuboid};
 pub use event::EventKind;
 pub use model::RigidBodyModel;
-pub use params::{SolverParams, MAX_SLEEP_STEPS};
+pub use params::{SolverParams, MAX_ANGULAR_SPEED_CAP, MAX_SLEEP_STEPS};
 pub use props::{BodyProps, PropsId};

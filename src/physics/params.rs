@@ -27,7 +27,9 @@ pub struct SolverParams {
     pub margin: f32,
     /// Speed cap in m/s; sets the displacement allowance per step (`max_speed * dt`).
     pub max_speed: f32,
-    /// Angular speed cap in rad/s.
+    /// Angular speed cap in rad/s of a body whose bounding radius is at least
+    /// `max_speed / max_angular_speed`; a smaller body may spin as fast as moves its bounding
+    /// sphere's surface at `max_speed` ([`SolverParams::spin_cap`]).
     pub max_angular_speed: f32,
     /// Largest separating speed at a contact point that a position correction may leave,
     /// m/s (above restitution's own target). 0 (the default) makes depenetration
@@ -51,7 +53,23 @@ pub struct SolverParams {
 /// steps, 18 minutes at 60 steps per second.
 pub const MAX_SLEEP_STEPS: u32 = u16::MAX as u32;
 
+/// The largest angular speed any body may reach, rad/s, and the largest
+/// `solver.max_angular_speed` a scene may set: far above any rigid body's, and far below
+/// where one step's rotation update overflows f32 (~1e20 rad/s).
+pub const MAX_ANGULAR_SPEED_CAP: f32 = 1e6;
+
 impl SolverParams {
+    /// The angular speed cap, rad/s, of a body whose bounding sphere has radius
+    /// `bounding_radius`: `max_angular_speed`, or the spin that moves the sphere's surface at
+    /// `max_speed` if that is faster (at most [`MAX_ANGULAR_SPEED_CAP`]). A ball may roll as
+    /// fast as it may slide: capped at 60 rad/s alone, a 5 cm ball could not roll faster
+    /// than 3 m/s, and friction braked one sliding at 5 m/s to 3 m/s instead of 25/7.
+    pub fn spin_cap(&self, bounding_radius: f32) -> f32 {
+        let rolling = self.max_speed / bounding_radius;
+        self.max_angular_speed
+            .max(rolling.min(MAX_ANGULAR_SPEED_CAP))
+    }
+
     /// The quiet steps after which a body is asleep, as its 16-bit counter reaches them:
     /// `sleep_steps` capped at [`MAX_SLEEP_STEPS`] (0: sleeping is off).
     pub fn sleep_limit(&self) -> u16 {

@@ -15,18 +15,13 @@ use super::contact::{ContactPoint, ContactSet, SetRole};
 use super::frame::Frame;
 use super::friction::{coulomb, Tangent, Traction};
 use super::params::SolverParams;
+use super::rotation::integrate_rotation;
 use crate::math::{Quat, Vec3};
-use nalgebra::{Matrix3, Quaternion};
+use nalgebra::Matrix3;
 
 /// The impact and velocity passes stop their sweeps once no point's velocity changed by more
 /// than this in one sweep, m/s.
 const SWEEP_TOLERANCE: f32 = 1e-4;
-
-/// Advances `q` by angular velocity `w` over `h` seconds (first order, renormalised).
-pub(crate) fn integrate_rotation(q: &Quat, w: &Vec3, h: f32) -> Quat {
-    let dq = Quaternion::new(0.0, w.x, w.y, w.z) * q.quaternion() * (0.5 * h);
-    Quat::new_normalize(q.quaternion() + dq)
-}
 
 /// One point's row of the velocity pass, for a substep (at the corrected pose).
 #[derive(Clone, Copy, Default)]

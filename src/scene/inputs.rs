@@ -314,13 +314,14 @@ impl InputScript {
                                 }
                                 let most = b.inv_inertia().max();
                                 let dw = length(angular) * f64::from(most);
-                                if dw > f64::from(scene.solver.max_angular_speed) * PUSH_CAP_SLACK {
+                                let spin_cap = scene.solver.spin_cap(b.bounding_radius());
+                                if dw > f64::from(spin_cap) * PUSH_CAP_SLACK {
                                     return Err(fail(
                                         i,
                                         "angular_impulse",
                                         format!("{angular:?}"),
                                         format!(
-                                            "could change body {id}'s spin by up to {dw:.4e} rad/s (about its axis of least inertia, {} kg·m²), more than solver.max_angular_speed = {} rad/s: give a smaller angular impulse",
+                                            "could change body {id}'s spin by up to {dw:.4e} rad/s (about its axis of least inertia, {} kg·m²), more than its spin cap of {spin_cap} rad/s (the larger of solver.max_angular_speed = {} and solver.max_speed / bounding radius): give a smaller angular impulse",
                                             1.0 / most,
                                             scene.solver.max_angular_speed
                                         ),
@@ -338,7 +339,10 @@ impl InputScript {
                             }
                             if let Some(w) = e.angular_velocity {
                                 finite("angular_velocity", w)?;
-                                if let Some(why) = over_spin_cap(w, &scene.solver) {
+                                let shape = specs.get(&id).map(|spec| spec.shape);
+                                let over =
+                                    shape.and_then(|shape| over_spin_cap(w, &shape, &scene.solver));
+                                if let Some(why) = over {
                                     return Err(fail(i, "angular_velocity", format!("{w:?}"), why));
                                 }
                             }

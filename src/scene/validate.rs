@@ -6,9 +6,7 @@ use crate::physics::metrics::{environment_penetration, pair_penetration};
 use crate::physics::{Body, Environment, RigidBodyModel, Shape, SolverParams};
 use crate::state::CellStates;
 
-/// The largest `solver.max_angular_speed` a scene may set, rad/s: far above any rigid body's,
-/// and far below where one step's rotation update overflows f32 (~1e20 rad/s).
-pub const MAX_ANGULAR_SPEED_CAP: f32 = 1e6;
+pub use crate::physics::MAX_ANGULAR_SPEED_CAP;
 
 /// The strongest gravity a scene may set, m/s² (about 100,000 g): far below where a step's
 /// velocity and displacement overflow f32 (a pull of 3e38 m/s² left the bodies hovering).
@@ -433,7 +431,7 @@ fn check_body(
     if let Some(why) = over_speed_cap(b.velocity, s) {
         return Err(c.fail(f("velocity"), b.velocity, &why));
     }
-    if let Some(why) = over_spin_cap(b.angular_velocity, s) {
+    if let Some(why) = over_spin_cap(b.angular_velocity, &b.shape, s) {
         return Err(c.fail(f("angular_velocity"), b.angular_velocity, &why));
     }
     Ok(())
@@ -495,12 +493,19 @@ pub(crate) fn over_speed_cap(velocity: [f32; 3], s: &SolverParams) -> Option<Str
     })
 }
 
-/// Why `angular_velocity` breaks `solver.max_angular_speed`, if it does.
-pub(crate) fn over_spin_cap(angular_velocity: [f32; 3], s: &SolverParams) -> Option<String> {
-    (length(angular_velocity) > f64::from(s.max_angular_speed)).then(|| {
+/// Why `angular_velocity` breaks the spin cap of a body of shape `shape`
+/// (`SolverParams::spin_cap`), if it does.
+pub(crate) fn over_spin_cap(
+    angular_velocity: [f32; 3],
+    shape: &Shape,
+    s: &SolverParams,
+) -> Option<String> {
+    let radius = shape.bounding_radius();
+    let cap = s.spin_cap(radius);
+    (length(angular_velocity) > f64::from(cap)).then(|| {
         format!(
-            "angular speed must not exceed solver.max_angular_speed = {} rad/s",
-            s.max_angular_speed
+            "angular speed must not exceed {cap} rad/s for this body: the larger of solver.max_angular_speed = {} rad/s and solver.max_speed / bounding radius = {} / {radius} m",
+            s.max_angular_speed, s.max_speed
         )
     })
 }
