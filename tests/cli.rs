@@ -266,7 +266,7 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "spin.toml",
             "position = [2.0, 1.0, 2.0]\n",
             "position = [2.0, 1.0, 2.0]\nangular_velocity = [1e30, 0.0, 0.0]\n",
-            "bodies[0].angular_velocity` = [1e30, 0.0, 0.0] is invalid: angular speed must not exceed solver.max_angular_speed",
+            "bodies[0].angular_velocity` = [1e30, 0.0, 0.0] is invalid: angular speed must not exceed 60 rad/s for this body: the larger of solver.max_angular_speed = 60 rad/s and solver.max_speed / bounding radius",
         ),
         // Caps and forces whose step overflows f32 (a NaN rotation, hovering bodies).
         (
