@@ -380,19 +380,8 @@ proptest! {
         friction in 0.2f32..1.0,
     ) {
         let g = 9.81f32;
-        let scene = SceneBuilder::new([-5.0, -1.0, -2.0], [120.0, 3.0, 2.0])
-            .environment_material(friction, 0.0)
-            .body_spec(BodySpec {
-                id: 0,
-                shape: Shape::Ball { radius: r },
-                material: Material { density, friction, restitution: 0.0 },
-                position: [0.0, r, 0.0],
-                rotation: [0.0; 3],
-                velocity: [v0, 0.0, 0.0],
-                angular_velocity: [0.0; 3],
-            })
-            .build()
-            .unwrap();
+        // Slides at most 2·20/(7·0.2·g) ≈ 2.9 s (≤ 60 m), then rolls for 30 steps.
+        let scene = ball_on_the_ground(120.0, r, density, friction, [-110.0, 0.0], [v0, 0.0, 0.0], [0.0; 3]);
         let sliding = 2.0 * v0 / (7.0 * friction * g);
         let steps = (sliding / scene.dt) as u32 + 30;
         let mut sim = Simulation::new(scene);

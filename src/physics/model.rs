@@ -858,10 +858,6 @@ impl CellModel for RigidBodyModel {
             // A body in free flight keeps its momentum: it counts towards sleep only while it
             // touches something, or if it does not move at all (then freezing it is exact).
             let held = found.touching || (own.is_still() && next.is_still());
-            // A body gathering speed is not coming to rest, however slow it still is: a box
-            // starting to slide down a slope a little steeper than its friction angle
-            // (0.09 m/s²) fell asleep at 0.046 m/s and stayed there.
-            let speeding_up = next.speeds_up_from(own);
             // A body that a removed one could touch wakes (`disturbed`): what it rested on
             // may be gone.
             next.rest_steps = if self.sleeping()
@@ -869,8 +865,12 @@ impl CellModel for RigidBodyModel {
                 && found.partners_quiet
                 && quiet(own)
                 && quiet(&next)
-                && !speeding_up
                 && !found.disturbed
+                // A body gathering speed is not coming to rest, however slow it still is: a
+                // box starting to slide down a slope a little steeper than its friction angle
+                // (0.09 m/s²) fell asleep at 0.046 m/s and stayed there. (Last: computed only
+                // for a body that is otherwise quiet.)
+                && !next.speeds_up_from(own)
             {
                 own.rest_steps
                     .saturating_add(1)
