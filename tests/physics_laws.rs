@@ -828,17 +828,111 @@ fn a_settling_pile_gains_no_mechanical_energy_beyond_20_mj() {
     }
 }
 
-/// Ball gases settling under gravity come to rest: every ball asleep within 15 s. These two
+/// A settling pile of balls never gains mechanical energy: from 5 s to 30 s, kinetic plus
+/// potential energy never rises above its lowest value so far by more than 10 mJ. While the
+/// lower body of a support stopped only its share of its approach to the body it carried
+/// (SPEC.md §5.2), a ball rolling off the ball under it slid on under the column it carried
+/// and lifted it 0.3–0.5 mm per step: these three draws of the settling sweep rose 288, 78
+/// and 20 mJ.
+#[test]
+fn a_settling_ball_pile_gains_no_mechanical_energy_beyond_10_mj() {
+    for seed in [18u64, 4, 8] {
+        let scene = ball_pile(seed);
+        let gravity = soda::math::Vec3::new(scene.gravity[0], scene.gravity[1], scene.gravity[2]);
+        let mut sim = Simulation::new(scene);
+        let mut lowest = f64::INFINITY;
+        for step in 1..=1800u32 {
+            sim.step();
+            if step < 300 {
+                continue;
+            }
+            let bs = bodies(&sim);
+            let energy =
+                kinetic(&bs) + soda::physics::metrics::potential_energy(bs.iter(), gravity);
+            lowest = lowest.min(energy);
+            assert!(
+                energy - lowest <= 0.01,
+                "seed {seed}, step {step}: {energy:.4} J, {:.4} J above the lowest so far",
+                energy - lowest
+            );
+        }
+    }
+}
+
+/// A light ball driven at 2 m/s under a ball five times as dense that leans on a wall and
+/// rests on it lifts it with no more energy than the scene has: kinetic plus potential
+/// energy never exceeds its start. While the upper body of a support saw the lower body
+/// move into it at the lower body's whole speed, as if that body were infinitely heavy
+/// (SPEC.md §5.2), the pair gained 26 mJ over the 67 mJ of kinetic energy it started with.
+#[test]
+fn a_light_ball_driven_under_a_heavy_one_lifts_it_with_no_energy_it_lacks() {
+    let (ra, rb, tilt) = (0.2f32, 0.3f32, 0.6f32);
+    let material = |density: f32| Material {
+        density,
+        friction: 0.3,
+        restitution: 0.0,
+    };
+    let ball = |id: u64, r: f32, density: f32, position: [f32; 3], vx: f32| BodySpec {
+        id,
+        shape: Shape::Ball { radius: r },
+        material: material(density),
+        position,
+        rotation: [0.0; 3],
+        velocity: [vx, 0.0, 0.0],
+        angular_velocity: [0.0; 3],
+    };
+    // The heavy ball touches the wall at x = 0 and rests on the light one along a normal
+    // `tilt` from the vertical; the light one, on the ground, is driven towards the wall.
+    let scene = SceneBuilder::new([0.0, -1.0, -2.0], [4.0, 5.0, 2.0])
+        .walls(true, false)
+        .environment_material(0.3, 0.0)
+        .body_spec(ball(
+            0,
+            ra,
+            1.0,
+            [rb + (ra + rb) * tilt.sin(), ra, 0.0],
+            -2.0,
+        ))
+        .body_spec(ball(
+            1,
+            rb,
+            5.0,
+            [rb, ra + (ra + rb) * tilt.cos(), 0.0],
+            0.0,
+        ))
+        .build()
+        .unwrap();
+    let energy = |bs: &[Body]| {
+        kinetic(bs)
+            + soda::physics::metrics::potential_energy(bs.iter(), Vec3::new(0.0, -9.81, 0.0))
+    };
+    let mut sim = Simulation::new(scene);
+    let start = energy(&bodies(&sim));
+    for step in 1..=120 {
+        sim.step();
+        let now = energy(&bodies(&sim));
+        assert!(
+            now <= start + 1e-5,
+            "step {step}: {now:.5} J against {start:.5} J at the start"
+        );
+    }
+}
+
+/// Ball gases settling under gravity come to rest: every ball asleep within 20 s. These two
 /// draws of the quality bench's gas (512 balls, restitution 0.5) never did while each body of
 /// a pile contact removed the pair's whole approach in its own solve (SPEC.md §5.3): two balls
-/// leaning on each other from two grooves rebounded from each other every other step.
+/// leaning on each other from two grooves rebounded from each other every other step. (They
+/// were asleep at steps 481 and 545; since a support moving into the body on it is seen at
+/// the speed the two share, SPEC.md §5.2, at 476 and 925: in the second a ball sinks slowly
+/// between two steep supports, gaining speed, and the sleep rule keeps it awake until it
+/// stops. The bound was 15 s.)
 #[test]
-fn ball_gases_that_never_came_to_rest_are_asleep_within_15_s() {
+fn ball_gases_that_never_came_to_rest_are_asleep_within_20_s() {
     for seed in [12u64, 58] {
         let scene = ball_box(seed, 0.5, 0.5, true);
         let sleep_steps = scene.solver.sleep_steps;
         let mut sim = Simulation::new(scene);
-        let asleep = (1..=900u32).find(|_| {
+        let asleep = (1..=1200u32).find(|_| {
             sim.step();
             bodies(&sim)
                 .iter()
@@ -846,7 +940,7 @@ fn ball_gases_that_never_came_to_rest_are_asleep_within_15_s() {
         });
         assert!(
             asleep.is_some(),
-            "seed {seed}: balls still awake after 900 steps: {:?}",
+            "seed {seed}: balls still awake after 1200 steps: {:?}",
             bodies(&sim)
                 .iter()
                 .filter(|b| u32::from(b.rest_steps) < sleep_steps)
