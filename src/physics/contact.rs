@@ -51,9 +51,10 @@ pub enum SetRole {
     /// correction is added whole rather than averaged with the other partners'.
     Pile,
     /// The partner rests on `i` (a support whose lower body is `i`). Its weight is not `i`'s
-    /// to carry (shock propagation), but `i` must not push into it for free: only `i`'s own
-    /// approach is stopped, `i`'s share of it, with no position correction, friction or
-    /// bounce. The partner's velocity counts only when it moves away from `i`.
+    /// to carry (shock propagation), but `i` must not push into it for free: `i`'s whole own
+    /// approach is stopped (the partner counts as immovable, as its weight would hold `i`),
+    /// with no position correction, friction or bounce. The partner's velocity counts only
+    /// when it moves away from `i`.
     Carried,
 }
 

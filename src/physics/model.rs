@@ -582,8 +582,9 @@ fn resting_view(i: &Body, j: &Body, m: &PairManifold, role: SetRole) -> ContactS
 
 /// Body `i`'s contact set for a support `j` it rests on (SPEC.md §5.2): `j` is immovable
 /// (inverse mass 0), and where `j` moves into `i` at a point, `i` sees it approach only at
-/// the speed the two would share after a plastic collision, `n·v_j · w_i / (w_i + w_j)` (`w`
-/// the generalised inverse masses along the normal at the point). Seeing the whole of it, a
+/// the speed the two would share after a plastic collision were `i` at rest along the
+/// normal, `n·v_j · w_i / (w_i + w_j)` (`w` the generalised inverse masses along the normal
+/// at the point). Seeing the whole of it, a
 /// heavy upper body was driven as if the light body under it were infinitely heavy: a ball
 /// pushed at 2 m/s under a ball five times its density leaning on a wall lifted it with
 /// 26 mJ more than the 67 mJ of kinetic energy the scene had.
