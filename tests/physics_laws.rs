@@ -906,6 +906,107 @@ fn a_light_ball_driven_under_a_heavy_one_lifts_it_with_no_energy_it_lacks() {
     }
 }
 
+/// A ball rolling off the ball under it into a light box that a wall holds comes to rest
+/// and falls asleep. The two form a symmetric pair (the box is beside the ball, not under it)
+/// whose collision, from step-`t` velocities, gave the light box nearly all of the impulse;
+/// while the ball's own solve then rolled it on, unresisted, into the box again (SPEC.md
+/// §5.3, `Paired` sets), only the pair's position correction held it there: it kept an
+/// approach of about 0.3 m/s, spun at 1.5 rad/s, sank 7 cm into the box, a new "impact"
+/// every step, until it slipped out sideways after 4 s and rolled away. Twelve
+/// arrangements: three tilts, a box a tenth and half the ball's density, two speeds.
+#[test]
+fn a_ball_rolling_into_a_light_box_held_by_a_wall_comes_to_rest() {
+    for tilt in [0.4f32, 0.7, 1.0] {
+        for box_density in [0.1f32, 0.5] {
+            for speed in [0.5f32, 1.0] {
+                ball_into_box_held_by_wall(tilt, box_density, speed);
+            }
+        }
+    }
+}
+
+/// The scene of [`a_ball_rolling_into_a_light_box_held_by_a_wall_comes_to_rest`]: the ball
+/// (density 1) rests on the support ball along a normal `tilt` from the vertical and is
+/// thrown at `speed` into the box (`box_density`).
+fn ball_into_box_held_by_wall(tilt: f32, box_density: f32, speed: f32) {
+    let (r_support, r_ball) = (0.3f32, 0.25f32);
+    let material = |density: f32| Material {
+        density,
+        friction: 0.5,
+        restitution: 0.3,
+    };
+    let spec = |id: u64, shape: Shape, density: f32, position: [f32; 3], vx: f32| BodySpec {
+        id,
+        shape,
+        material: material(density),
+        position,
+        rotation: [0.0; 3],
+        velocity: [vx, 0.0, 0.0],
+        angular_velocity: [0.0; 3],
+    };
+    // A tall light box against the wall at x = 0; the ball touches its face and rests on the
+    // support ball along a normal `tilt` from the vertical, rolling towards the box.
+    let half = [0.2f32, 0.5, 0.3];
+    let ball_x = 2.0 * half[0] + r_ball;
+    let support_x = ball_x + (r_support + r_ball) * tilt.sin();
+    let scene = SceneBuilder::new([0.0, -1.0, -2.0], [4.0, 5.0, 2.0])
+        .walls(true, false)
+        .environment_material(0.5, 0.3)
+        .body_spec(spec(
+            0,
+            Shape::Cuboid { half_extents: half },
+            box_density,
+            [half[0], half[1], 0.0],
+            0.0,
+        ))
+        .body_spec(spec(
+            1,
+            Shape::Ball { radius: r_support },
+            1.0,
+            [support_x, r_support, 0.0],
+            0.0,
+        ))
+        .body_spec(spec(
+            2,
+            Shape::Ball { radius: r_ball },
+            1.0,
+            [ball_x, r_support + (r_support + r_ball) * tilt.cos(), 0.0],
+            -speed,
+        ))
+        .build()
+        .unwrap();
+    let sleep_steps = scene.solver.sleep_steps;
+    let mut sim = Simulation::new(scene);
+    // How deep the ball is in the box (the box's face at rest against the wall).
+    let overlap = |bs: &[Body]| 2.0 * half[0] - (bs[2].position.x - r_ball);
+    let asleep = (1..=600u32).find(|step| {
+        sim.step();
+        let now = bodies(&sim);
+        // The impact's first steps may press the light box into the wall; the ball never
+        // sinks into it.
+        assert!(
+            overlap(&now) < 0.025,
+            "tilt {tilt}, box density {box_density}, {speed} m/s: step {step}: the ball is \
+             {:.3} m deep in the box",
+            overlap(&now)
+        );
+        now.iter().all(|b| u32::from(b.rest_steps) >= sleep_steps)
+    });
+    assert!(
+        overlap(&bodies(&sim)) < 0.005,
+        "tilt {tilt}, box density {box_density}, {speed} m/s: asleep {:.4} m deep in the box",
+        overlap(&bodies(&sim))
+    );
+    let ball = bodies(&sim)[2].clone();
+    assert!(
+        asleep.is_some(),
+        "tilt {tilt}, box density {box_density}, {speed} m/s: still awake after 10 s: the ball at {:?} moves at {:?} m/s and spins at {:?} rad/s",
+        ball.position,
+        ball.linvel,
+        ball.angvel
+    );
+}
+
 /// Ball gases settling under gravity come to rest: every ball asleep within 20 s. These two
 /// draws of the quality bench's gas (512 balls, restitution 0.5) never did while each body of
 /// a pile contact removed the pair's whole approach in its own solve (SPEC.md §5.3): two balls

@@ -56,6 +56,21 @@ pub enum SetRole {
     /// with no position correction, friction or bounce. The partner's velocity counts only
     /// when it moves away from `i`.
     Carried,
+    /// The partner of a symmetric pair (SPEC.md §5.3) that rests on a support chain. The
+    /// pair's response took their collision from step-`t` velocities before `i`'s solve; what
+    /// `i` gains towards `j` within its own solve (gravity, its supports, friction) the
+    /// partner cannot see, and it is `i`'s to stop: `i` may not approach `j` faster than `j`
+    /// moves after the pair's response (`j` immovable, inverse mass 0), with no position
+    /// correction (the pair corrects the overlap), friction or bounce (both the pair's).
+    Paired,
+}
+
+impl SetRole {
+    /// Whether `i`'s solve only stops its approach to the partner: no position correction,
+    /// friction or bounce ([`SetRole::Carried`], [`SetRole::Paired`]).
+    pub fn stops_approach_only(self) -> bool {
+        matches!(self, SetRole::Carried | SetRole::Paired)
+    }
 }
 
 /// A pair manifold between bodies `a` (lower id) and `b`, in world frame.

@@ -52,6 +52,8 @@ struct PairEntry<'a> {
     offset: [i32; 3],
     /// The pair at step `t`, in canonical order.
     contact: PairContact,
+    /// Their manifold (canonical order), for the [`SetRole::Paired`] set.
+    manifold: PairManifold,
 }
 
 /// What one body touches at step `t`.
@@ -174,6 +176,7 @@ impl RigidBodyModel {
                             partner: j,
                             offset: c.offset,
                             contact,
+                            manifold: m,
                         })
                     }
                 }
@@ -622,6 +625,26 @@ fn carried_contact(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
     set
 }
 
+/// Body `i`'s contact set for the partner of a symmetric pair that rests on a support chain
+/// (SPEC.md §5.3), `after` being the partner with its velocities after the pair's response:
+/// restitution 0, `after`'s velocity only where it moves away from `i` (a partner driven into
+/// `i` by the pair has given `i` its share already) and `after` immovable (inverse mass 0),
+/// so that `i`'s solve stops any approach it gains towards the partner beyond the partner's
+/// own motion away. Without it the
+/// solve accelerated a ball rolling on the ball under it into a light box beside it on the
+/// ground, every step, and only the pair's position correction held it there: the ball
+/// kept spinning at 1.1 rad/s in place, each step an "impact" whose impulse the light box
+/// passed on to the ground (a mixed pile, measured 2026-11-28).
+fn paired_contact(i: &Body, after: &Body, m: &PairManifold) -> ContactSet {
+    let mut set = resting_view(i, after, m, SetRole::Paired);
+    for p in &mut set.points {
+        let away = p.normal.dot(&p.partner_velocity).min(0.0);
+        p.partner_velocity = p.normal * away;
+        p.partner_inv_mass = 0.0;
+    }
+    set
+}
+
 /// The pair in canonical order: lower id first.
 fn canonical<'a>(x: &'a Body, y: &'a Body) -> (&'a Body, &'a Body) {
     if x.id() < y.id() {
@@ -795,6 +818,9 @@ impl CellModel for RigidBodyModel {
             // counts, summed in ascending partner id.
             let mut effect = PairEffect::default();
             let rest = self.rest_speed();
+            // Partners on a support chain after the pair's response: `own` stops what it
+            // gains towards them within its solve (a `Paired` set, SPEC.md §5.3).
+            let mut paired: Vec<ContactSet> = Vec::new();
             for entry in &found.pairs {
                 // An impact first in both bodies' matching: full mass. A deferred impact:
                 // only projected without gravity, split masses with gravity. Resting
@@ -820,6 +846,14 @@ impl CellModel for RigidBodyModel {
                         .contact
                         .effect(own.id(), resolve, counts, self.dt, rest),
                 );
+                let j = entry.partner;
+                if j.support_depth > 0 {
+                    let theirs = entry.contact.effect(j.id(), resolve, counts, self.dt, rest);
+                    let mut after = j.clone();
+                    after.linvel += theirs.dv;
+                    after.angvel += theirs.dw;
+                    paired.push(paired_contact(own, &after, &entry.manifold));
+                }
             }
             let mut start = own.clone();
             start.linvel += effect.dv;
@@ -830,8 +864,11 @@ impl CellModel for RigidBodyModel {
             // with it. Building only those saves the work of every resting column. Inserted
             // in ascending partner id, before the environment.
             let mut left_out = Vec::new();
-            for (j, m) in &found.carried {
-                let set = carried_contact(&start, j, m);
+            let carried = found
+                .carried
+                .iter()
+                .map(|(j, m)| carried_contact(&start, j, m));
+            for set in carried.chain(paired) {
                 if approaches(&start, &set) {
                     insert_by_partner(&mut found.sets, set);
                 } else {

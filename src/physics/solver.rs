@@ -491,8 +491,9 @@ pub(crate) fn solve_body(
             let mut dx = Vec3::zeros();
             let mut dtheta = Vec3::zeros();
             let mut touched = false;
-            if set.role == SetRole::Carried {
-                // Not `i`'s overlap to remove: the partner rests on `i` and corrects it.
+            if set.role.stops_approach_only() {
+                // Not `i`'s overlap to remove: the partner rests on `i` and corrects it, or
+                // the pair's response does.
                 k += set.points.len();
                 continue;
             }
@@ -621,7 +622,7 @@ pub(crate) fn solve_body(
                         rn,
                         irn,
                         w: w_own + cp.partner_inv_mass,
-                        tangent: if set.role == SetRole::Carried {
+                        tangent: if set.role.stops_approach_only() {
                             Tangent::default()
                         } else {
                             Tangent::new(&f1, &r, &cp.normal, cp.partner_inv_mass)
@@ -639,7 +640,7 @@ pub(crate) fn solve_body(
             let mut largest_change = 0.0f32;
             let mut k = 0;
             for (s, set) in sets.iter().enumerate() {
-                let carried = set.role == SetRole::Carried;
+                let carried = set.role.stops_approach_only();
                 // Only an approach is removed in a set that bounced (restitution's separation
                 // is kept) or is carried; elsewhere depenetration must not fling bodies, and
                 // a separating speed above `max_separation_speed` is removed too.
@@ -716,7 +717,7 @@ pub(crate) fn solve_body(
             for cp in &set.points {
                 let row = &velocity[k];
                 k += 1;
-                if row.pushed <= 0.0 || set.role == SetRole::Carried {
+                if row.pushed <= 0.0 || set.role.stops_approach_only() {
                     continue;
                 }
                 let bound = set.friction * row.normal_impulse();
