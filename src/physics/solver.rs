@@ -258,7 +258,7 @@ fn face_impulses(inv_mass: f32, rows: &[FaceRow]) -> Option<[f32; 4]> {
     let lambda = k.cholesky()?.solve(&rhs);
     let mut out = [0.0f32; 4];
     for a in 0..m {
-        if !(lambda[a] >= 0.0) {
+        if lambda[a].is_nan() || lambda[a] < 0.0 {
             return None;
         }
         out[a] = lambda[a] as f32;
