@@ -19,7 +19,8 @@ pub struct SolverParams {
     pub velocity_iterations: u32,
     /// Fastest approach, m/s, of the other points of a partner's manifold once one of its
     /// points touches within a substep (a tilted face lands as a face, not corner first).
-    /// A ball against the static environment is not held back (SPEC.md §5.3).
+    /// The static environment holds no body back: a box's face against it is solved as one
+    /// block instead (SPEC.md §5.3).
     pub landing_speed: f32,
     /// Relaxation factor applied to the averaged position correction.
     pub relaxation: f32,
