@@ -616,13 +616,7 @@ fn support_contact(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
 /// `j`: a ball rolling off the ball under it lifted the column it carried by 0.3–0.5 mm per
 /// step, 0.29 J in one pile of 225 balls (measured 2026-11-27).
 fn carried_contact(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
-    let mut set = resting_view(i, j, m, SetRole::Carried);
-    for p in &mut set.points {
-        let away = p.normal.dot(&p.partner_velocity).min(0.0);
-        p.partner_velocity = p.normal * away;
-        p.partner_inv_mass = 0.0;
-    }
-    set
+    approach_only_view(i, j, m, SetRole::Carried)
 }
 
 /// Body `i`'s contact set for the partner of a symmetric pair that rests on a support chain
@@ -636,7 +630,14 @@ fn carried_contact(i: &Body, j: &Body, m: &PairManifold) -> ContactSet {
 /// kept spinning at 1.1 rad/s in place, each step an "impact" whose impulse the light box
 /// passed on to the ground (a mixed pile, measured 2026-11-28).
 fn paired_contact(i: &Body, after: &Body, m: &PairManifold) -> ContactSet {
-    let mut set = resting_view(i, after, m, SetRole::Paired);
+    approach_only_view(i, after, m, SetRole::Paired)
+}
+
+/// Body `i`'s view of `j` in a set that only stops `i`'s approach (`role`: carried or
+/// paired): restitution 0, `j`'s velocity only where it moves away from `i`, and `j`
+/// immovable (inverse mass 0).
+fn approach_only_view(i: &Body, j: &Body, m: &PairManifold, role: SetRole) -> ContactSet {
+    let mut set = resting_view(i, j, m, role);
     for p in &mut set.points {
         let away = p.normal.dot(&p.partner_velocity).min(0.0);
         p.partner_velocity = p.normal * away;
@@ -849,17 +850,17 @@ impl CellModel for RigidBodyModel {
                 let j = entry.partner;
                 if j.support_depth > 0 {
                     let theirs = entry.contact.effect(j.id(), resolve, counts, self.dt, rest);
+                    // The set reads the partner's linear velocity only (as every view does).
                     let mut after = j.clone();
                     after.linvel += theirs.dv;
-                    after.angvel += theirs.dw;
                     paired.push(paired_contact(own, &after, &entry.manifold));
                 }
             }
             let mut start = own.clone();
             start.linvel += effect.dv;
             start.angvel += effect.dw;
-            // A carried set acts only if the body approaches the body it carries (SPEC.md
-            // §5.2): with its pairs' impulses at the start of its solve, or else at the end
+            // A carried or paired set acts only if the body approaches its partner (SPEC.md
+            // §5.2, §5.3): with its pairs' impulses at the start of its solve, or else at the end
             // of it (it slid into it within the step), in which case the body is solved again
             // with it. Building only those saves the work of every resting column. Inserted
             // in ascending partner id, before the environment.

@@ -35,7 +35,7 @@ struct VelocityRow {
     irn: Vec3,
     /// Generalised inverse mass along the normal, the partner's included.
     w: f32,
-    /// The tangent plane (unused in a carried set).
+    /// The tangent plane (unused in a carried or paired set).
     tangent: Tangent,
     /// Normal impulse accumulated by this pass (negative where a separation is capped).
     normal: f32,
@@ -114,7 +114,8 @@ fn offset(body: &Body, rot: &Matrix3<f32>, cp: &ContactPoint) -> Vec3 {
 }
 
 /// Whether some point of `set` approaches its partner at `body`'s velocities (relative to the
-/// point's partner velocity): a carried set (SPEC.md §5.2) acts only then.
+/// point's partner velocity): a carried set (SPEC.md §5.2) or a paired set (§5.3) acts only
+/// then.
 pub(crate) fn approaches(body: &Body, set: &ContactSet) -> bool {
     let rot = body.rotation.to_rotation_matrix().into_inner();
     set.points.iter().any(|cp| {
@@ -549,7 +550,7 @@ pub(crate) fn solve_body(
                 continue;
             }
             // The full compression impulses, on a copy of the velocities (only sets with
-            // restitution reach here: never a pile or carried set, so every row's `w` has the
+            // restitution reach here: never a pile, carried or paired set, so every row's `w` has the
             // partner's inverse mass in it).
             let (mut v, mut w) = (b.linvel, b.angvel);
             let mut full: smallvec::SmallVec<[f32; 8]> =
@@ -789,11 +790,12 @@ pub(crate) fn solve_body(
             let mut largest_change = 0.0f32;
             let mut k = 0;
             for (s, set) in sets.iter().enumerate() {
-                let carried = set.role.stops_approach_only();
+                let approach_only = set.role.stops_approach_only();
                 // Only an approach is removed in a set that bounced (restitution's separation
-                // is kept) or is carried; elsewhere depenetration must not fling bodies, and
+                // is kept) or only stops an approach (carried, paired); elsewhere depenetration
+                // must not fling bodies, and
                 // a separating speed above `max_separation_speed` is removed too.
-                let capped = !bounced_sets[s] && !carried;
+                let capped = !bounced_sets[s] && !approach_only;
                 for cp in &set.points {
                     let row = &mut velocity[k];
                     k += 1;
@@ -826,7 +828,7 @@ pub(crate) fn solve_body(
                         row.normal = next;
                         largest_change = largest_change.max(d.abs() * row.w);
                     }
-                    if carried {
+                    if approach_only {
                         continue;
                     }
                     let bound = set.friction * row.normal_impulse();
