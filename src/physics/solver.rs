@@ -296,6 +296,45 @@ fn face_impulses(inv_mass: f32, rows: &[FaceRow]) -> Option<[f32; 4]> {
     Some(out)
 }
 
+/// The face block (SPEC.md §5.3, step 3) of a box against the static environment: `row(k,
+/// cp, b)` gives point `k`'s row if it has a deficit at the body's current velocities; the
+/// points with one (the four largest, [`nearest_face`]) are solved together
+/// ([`face_impulses`]) and their impulses applied to `b`. Returns each point's impulse, for the
+/// caller's accumulator (empty if the block was not applied).
+fn face_block(
+    b: &mut Body,
+    sets: &[ContactSet],
+    inv_mass: f32,
+    row: impl Fn(usize, &ContactPoint, &Body) -> Option<FaceRow>,
+) -> smallvec::SmallVec<[(usize, f32); 4]> {
+    let mut pushed = smallvec::SmallVec::new();
+    let mut k = 0;
+    for set in sets {
+        let start = k;
+        k += set.points.len();
+        if set.partner.is_some() {
+            continue;
+        }
+        let mut at: smallvec::SmallVec<[usize; 4]> = smallvec::SmallVec::new();
+        let mut rows: smallvec::SmallVec<[FaceRow; 4]> = smallvec::SmallVec::new();
+        for (kk, cp) in (start..k).zip(&set.points) {
+            if let Some(r) = row(kk, cp, b) {
+                at.push(kk);
+                rows.push(r);
+            }
+        }
+        nearest_face(&mut at, &mut rows);
+        if let Some(lambda) = face_impulses(inv_mass, &rows) {
+            for ((&kk, r), l) in at.iter().zip(&rows).zip(lambda) {
+                b.linvel += r.normal * (l * inv_mass);
+                b.angvel += r.irn * l;
+                pushed.push((kk, l));
+            }
+        }
+    }
+    pushed
+}
+
 /// The per-point and per-set rows of one body's solve, kept between solves so a cell's
 /// bodies reuse one allocation (a solve starts them afresh: `reset`).
 #[derive(Default)]
@@ -449,37 +488,19 @@ pub(crate) fn solve_body(
         // A box's face against the static environment: the points that approach faster than
         // their gaps allow, solved together first (the sweeps below then refine).
         if !ball {
-            let mut k = 0;
-            for set in sets {
-                let start = k;
-                k += set.points.len();
-                if set.partner.is_some() {
-                    continue;
-                }
-                let mut at: smallvec::SmallVec<[usize; 4]> = smallvec::SmallVec::new();
-                let mut rows: smallvec::SmallVec<[FaceRow; 4]> = smallvec::SmallVec::new();
-                for (kk, cp) in (start..k).zip(&set.points) {
-                    let row = &impact[kk];
-                    let vn = cp.normal.dot(&b.linvel) + b.angvel.dot(&row.rn);
-                    let deficit = -row.gap_speed - vn;
-                    if deficit > 0.0 {
-                        at.push(kk);
-                        rows.push(FaceRow {
-                            normal: cp.normal,
-                            rn: row.rn,
-                            irn: row.irn,
-                            deficit,
-                        });
-                    }
-                }
-                nearest_face(&mut at, &mut rows);
-                if let Some(lambda) = face_impulses(f0.inv_mass, &rows) {
-                    for ((&kk, row), l) in at.iter().zip(&rows).zip(lambda) {
-                        b.linvel += row.normal * (l * f0.inv_mass);
-                        b.angvel += row.irn * l;
-                        scratch[kk].impulse += l;
-                    }
-                }
+            let pushed = face_block(&mut b, sets, f0.inv_mass, |k, cp, b| {
+                let row = &impact[k];
+                let vn = cp.normal.dot(&b.linvel) + b.angvel.dot(&row.rn);
+                let deficit = -row.gap_speed - vn;
+                (deficit > 0.0).then_some(FaceRow {
+                    normal: cp.normal,
+                    rn: row.rn,
+                    irn: row.irn,
+                    deficit,
+                })
+            });
+            for (k, l) in pushed {
+                scratch[k].impulse += l;
             }
         }
         for _ in 0..p.impact_iterations {
@@ -753,36 +774,18 @@ pub(crate) fn solve_body(
         // A box's face against the static environment: the approaching points stopped
         // together first, as in the impact pass.
         if any && !ball {
-            let mut k = 0;
-            for set in sets {
-                let start = k;
-                k += set.points.len();
-                if set.partner.is_some() {
-                    continue;
-                }
-                let mut at: smallvec::SmallVec<[usize; 4]> = smallvec::SmallVec::new();
-                let mut rows: smallvec::SmallVec<[FaceRow; 4]> = smallvec::SmallVec::new();
-                for (kk, cp) in (start..k).zip(&set.points) {
-                    let row = &velocity[kk];
-                    let vn = cp.normal.dot(&b.linvel) + b.angvel.dot(&row.rn);
-                    if row.pushed > 0.0 && vn < 0.0 {
-                        at.push(kk);
-                        rows.push(FaceRow {
-                            normal: cp.normal,
-                            rn: row.rn,
-                            irn: row.irn,
-                            deficit: -vn,
-                        });
-                    }
-                }
-                nearest_face(&mut at, &mut rows);
-                if let Some(lambda) = face_impulses(f1.inv_mass, &rows) {
-                    for ((&kk, row), l) in at.iter().zip(&rows).zip(lambda) {
-                        b.linvel += row.normal * (l * f1.inv_mass);
-                        b.angvel += row.irn * l;
-                        velocity[kk].normal += l;
-                    }
-                }
+            let pushed = face_block(&mut b, sets, f1.inv_mass, |k, cp, b| {
+                let row = &velocity[k];
+                let vn = cp.normal.dot(&b.linvel) + b.angvel.dot(&row.rn);
+                (row.pushed > 0.0 && vn < 0.0).then_some(FaceRow {
+                    normal: cp.normal,
+                    rn: row.rn,
+                    irn: row.irn,
+                    deficit: -vn,
+                })
+            });
+            for (k, l) in pushed {
+                velocity[k].normal += l;
             }
         }
         let sweeps = if any { p.velocity_iterations } else { 0 };
