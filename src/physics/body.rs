@@ -322,6 +322,19 @@ impl Body {
         q.transform_vector(&local.component_mul(&d))
     }
 
+    /// Orientation and world angular velocity after `h` seconds turning without torque,
+    /// angular momentum kept ([`free_rotation`](super::free_rotation), SPEC.md §5.3).
+    pub(crate) fn free_rotation(&self, h: f32) -> super::free_rotation::FreeTurn {
+        let p = self.props();
+        super::free_rotation::free_rotation(
+            &self.rotation,
+            &self.angvel,
+            &p.inv_inertia(),
+            p.isotropic(),
+            h,
+        )
+    }
+
     /// Mass in kg.
     pub fn mass(&self) -> f32 {
         1.0 / self.inv_mass()

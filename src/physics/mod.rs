@@ -6,6 +6,7 @@ mod contact;
 mod environment;
 mod event;
 mod frame;
+mod free_rotation;
 mod friction;
 pub mod metrics;
 mod model;

@@ -9,31 +9,35 @@
 //! (where the next term is below f32's resolution), and the quaternion is squared back.
 
 use crate::math::{Quat, Vec3};
-use nalgebra::Quaternion;
+use nalgebra::{Quaternion, RealField, Vector3};
 
 /// The largest half-angle, rad, the polynomials take directly; `x^8/8!` is 4e-10 there.
-const LARGEST_DIRECT_HALF_ANGLE: f32 = 0.25;
+const LARGEST_DIRECT_HALF_ANGLE: f64 = 0.25;
 
-/// The unit quaternion of the rotation by `|theta|` rad about `theta` (the rotation vector),
-/// as `(w, v)`: `w = cos(|theta|/2)` and `v = sin(|theta|/2)·theta/|theta|`.
-fn rotation_vector_quaternion(theta: &Vec3) -> Quaternion<f32> {
-    let mut half = theta * 0.5;
+/// The quaternion of the rotation by `|theta|` rad about `theta` (the rotation vector), as
+/// `(w, v)`: `w = cos(|theta|/2)` and `v = sin(|theta|/2)·theta/|theta|`; unit within the
+/// polynomials' error (4e-10) and rounding. In `f32` for states, in `f64` where
+/// [`free_rotation`](super::free_rotation) keeps its invariants below `f32`'s rounding.
+pub(super) fn rotation_vector_quaternion<T: RealField + Copy>(theta: &Vector3<T>) -> Quaternion<T> {
+    let c = |x: f64| -> T { nalgebra::convert(x) };
+    let mut half = theta * c(0.5);
     let mut squarings = 0u32;
     // Halve until the half-angle is at most ¼ rad (compared as squares: no square root).
-    let limit = LARGEST_DIRECT_HALF_ANGLE * LARGEST_DIRECT_HALF_ANGLE;
+    let limit = c(LARGEST_DIRECT_HALF_ANGLE) * c(LARGEST_DIRECT_HALF_ANGLE);
     while half.norm_squared() > limit && squarings < 64 {
-        half *= 0.5;
+        half *= c(0.5);
         squarings += 1;
     }
     let x2 = half.norm_squared();
+    let one = T::one();
     // cos x and sin x / x to the x⁶ term (Horner form).
-    let cos = 1.0 - x2 / 2.0 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0));
-    let sinc = 1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0));
+    let cos = one - x2 / c(2.0) * (one - x2 / c(12.0) * (one - x2 / c(30.0)));
+    let sinc = one - x2 / c(6.0) * (one - x2 / c(20.0) * (one - x2 / c(42.0)));
     let (mut w, mut v) = (cos, half * sinc);
     // Squaring a rotation about a fixed axis doubles its angle: (w, v)² = (w² − v·v, 2·w·v).
     for _ in 0..squarings {
         let next_w = w * w - v.norm_squared();
-        v *= 2.0 * w;
+        v *= c(2.0) * w;
         w = next_w;
     }
     Quaternion::new(w, v.x, v.y, v.z)

@@ -386,7 +386,9 @@ pub(crate) fn solve_body(
         for _ in 0..n_sub {
             b.linvel += gravity * h;
             b.position += b.linvel * h;
-            b.rotation = integrate_rotation(&b.rotation, &b.angvel, h);
+            let turned = b.free_rotation(h);
+            b.rotation = turned.rotation;
+            b.angvel = turned.angvel;
         }
         return b;
     }
@@ -610,6 +612,9 @@ pub(crate) fn solve_body(
 
         // Predict.
         let xp = b.position + b.linvel * h;
+        // With contacts the spin is kept through the substep's motion (a rotation about `ω`
+        // keeps `½ωᵀIω`); the torque-free turn of the angular momentum is for free flight
+        // only (SPEC.md §5.3, "The per-body solve").
         let qp = integrate_rotation(&b.rotation, &b.angvel, h);
         let fp = Frame::new(&b, &qp);
 
