@@ -1185,9 +1185,11 @@ proptest! {
     }
 
     /// A box tumbling in free flight, whatever its proportions, orientation and spin, keeps
-    /// its angular momentum `R·I·Rᵀ·ω` (it precesses: its angular velocity moves) and its
-    /// kinetic energy, within f32 rounding, over 5 s (SPEC.md §5.3, the torque-free rotation).
-    /// Keeping `ω` fixed instead turned `L` with the body by up to tens of degrees.
+    /// its angular momentum `R·I·Rᵀ·ω` and its kinetic energy over 5 s (SPEC.md §5.3, the
+    /// torque-free rotation), within 1e-5 plus the rounding of storing `ω` in `f32` at every
+    /// substep: `ε·κ` per substep, `κ` the ratio of the largest to the smallest principal
+    /// moment, adding up as a random walk (`ε·κ·√n` after `n` substeps). Keeping `ω` fixed
+    /// instead turned `L` with the body by up to tens of degrees.
     #[test]
     fn a_tumbling_box_in_free_flight_keeps_its_angular_momentum_and_energy(
         half in prop::array::uniform3(0.02f32..0.6),
@@ -1204,7 +1206,12 @@ proptest! {
             velocity: [0.0; 3],
             angular_velocity: spin,
         };
-        let h = history(free_space().body_spec(body).build().unwrap(), 300);
+        let scene = free_space().body_spec(body).build().unwrap();
+        let substeps = scene.solver.substeps as f32;
+        let h = history(scene, 300);
+        let moments = [0, 1, 2].map(|k| 1.0 / h[0][0].inv_inertia()[k]);
+        let kappa = moments.iter().copied().fold(0.0f32, f32::max)
+            / moments.iter().copied().fold(f32::INFINITY, f32::min);
         let momentum_of = |b: &Body| {
             let local = b.rotation.inverse() * b.angvel;
             b.rotation * local.component_div(&b.inv_inertia())
@@ -1215,8 +1222,9 @@ proptest! {
             let b = &states[0];
             let l = momentum_of(b);
             let e = b.kinetic_energy();
-            prop_assert!((l - l0).norm() <= 1e-5 * l0.norm() + 1e-12, "step {}: L {:?} from {:?}", step, l, l0);
-            prop_assert!((e - e0).abs() <= 1e-5 * e0 + 1e-12, "step {}: energy {} from {}", step, e, e0);
+            let tolerance = 1e-5 + f32::EPSILON * kappa * (step as f32 * substeps).sqrt();
+            prop_assert!((l - l0).norm() <= tolerance * l0.norm() + 1e-12, "step {}: L {:?} from {:?} (κ {})", step, l, l0, kappa);
+            prop_assert!((e - e0).abs() <= tolerance * e0 + 1e-12, "step {}: energy {} from {} (κ {})", step, e, e0, kappa);
         }
     }
 }
