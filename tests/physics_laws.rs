@@ -1189,7 +1189,8 @@ proptest! {
     /// torque-free rotation), within 1e-5 plus the rounding of storing `ω` in `f32` at every
     /// substep: `ε·κ` per substep, `κ` the ratio of the largest to the smallest principal
     /// moment, adding up as a random walk (`ε·κ·√n` after `n` substeps). Keeping `ω` fixed
-    /// instead turned `L` with the body by up to tens of degrees.
+    /// instead turned `L` with the body (a brick spun at 4 rad/s about a tilted axis: 13° in
+    /// 10 s).
     #[test]
     fn a_tumbling_box_in_free_flight_keeps_its_angular_momentum_and_energy(
         half in prop::array::uniform3(0.02f32..0.6),

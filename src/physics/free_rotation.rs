@@ -89,9 +89,13 @@ pub(crate) fn free_rotation(
             if !converged && pieces < MAX_PIECES {
                 break;
             }
-            l = turn(&(solved.w * -piece), &l);
-            rotation *=
+            // The body turns by `piece·w`; its momentum, seen from the body, by the inverse
+            // (`rotation_vector_quaternion(−θ)` is the conjugate of `(θ)` bit for bit, so
+            // this is `turn(−piece·w, l)` without building the quaternion twice).
+            let body_turn =
                 UnitQuaternion::new_normalize(rotation_vector_quaternion(&(solved.w * piece)));
+            l = body_turn.inverse_transform_vector(&l);
+            rotation *= body_turn;
         }
         if converged || pieces >= MAX_PIECES {
             break (rotation, l);
