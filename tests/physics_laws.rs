@@ -1034,10 +1034,12 @@ fn ball_into_box_held_by_wall(tilt: f32, box_density: f32, speed: f32) {
 /// were asleep at steps 481 and 545; since a support moving into the body on it is seen at
 /// the speed the two share, SPEC.md §5.2, at 476 and 925: in the second a ball sinks slowly
 /// between two steep supports, gaining speed, and the sleep rule keeps it awake until it
-/// stops. The bound was 15 s.)
+/// stops. The bound was 15 s.) Draws 4 and 8 kept three balls awake for good, trading
+/// velocities of 0.1–1.4 mm/s that reset their counters as "speeding up", until such noise
+/// below the speeding-up floor stopped counting (SPEC.md §5.4, 2026-11-28).
 #[test]
 fn ball_gases_that_never_came_to_rest_are_asleep_within_20_s() {
-    for seed in [12u64, 58] {
+    for seed in [4u64, 8, 12, 58] {
         let scene = ball_box(seed, 0.5, 0.5, true);
         let sleep_steps = scene.solver.sleep_steps;
         let mut sim = Simulation::new(scene);

@@ -929,9 +929,12 @@ impl CellModel for RigidBodyModel {
                 && !found.disturbed
                 // A body gathering speed is not coming to rest, however slow it still is: a
                 // box starting to slide down a slope a little steeper than its friction angle
-                // (0.09 m/s²) fell asleep at 0.046 m/s and stayed there. (Last: computed only
+                // (0.09 m/s²) fell asleep at 0.046 m/s and stayed there. Below the floor a
+                // speed's rise is the solver's noise in a resting pile, and a body gathering
+                // speed passes the floor within half the sleep window. (Last: computed only
                 // for a body that is otherwise quiet.)
-                && !next.speeds_up_from(own)
+                && !(next.linvel.norm() > self.params.speeding_up_floor()
+                    && next.speeds_up_from(own))
             {
                 own.rest_steps
                     .saturating_add(1)
