@@ -927,24 +927,18 @@ impl CellModel for RigidBodyModel {
                 && quiet(own)
                 && quiet(&next)
                 && !found.disturbed
-            {
                 // A body gathering speed is not coming to rest, however slow it still is: a
                 // box starting to slide down a slope a little steeper than its friction angle
-                // (0.09 m/s²) fell asleep at 0.046 m/s and stayed there. Above the floor
-                // speeding up resets the counter; below it (the solver's noise in a resting
-                // pile, or the first steps of a body gathering speed, which passes the floor
-                // within half the sleep window) it only keeps the counter short of the limit,
-                // so a body that speeds up in a step is never asleep after it. (Last: computed
-                // only for a body that is otherwise quiet.)
-                let limit = self.params.sleep_limit();
-                let counted = own.rest_steps.saturating_add(1);
-                if !next.speeds_up_from(own) {
-                    counted.min(limit)
-                } else if next.linvel.norm() > self.params.speeding_up_floor() {
-                    0
-                } else {
-                    counted.min(limit - 1)
-                }
+                // (0.09 m/s²) fell asleep at 0.046 m/s and stayed there. Below the floor a
+                // speed's rise is the solver's noise in a resting pile, and a body gathering
+                // speed passes the floor within half the sleep window. (Last: computed only
+                // for a body that is otherwise quiet.)
+                && !(next.linvel.norm() > self.params.speeding_up_floor()
+                    && next.speeds_up_from(own))
+            {
+                own.rest_steps
+                    .saturating_add(1)
+                    .min(self.params.sleep_limit())
             } else {
                 0
             };

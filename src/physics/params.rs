@@ -78,14 +78,13 @@ impl SolverParams {
         self.sleep_steps.min(MAX_SLEEP_STEPS) as u16
     }
 
-    /// The speed, m/s, at or below which a body's speeding up does not reset its rest
-    /// counter but only keeps it short of the limit (SPEC.md §5.4): [`SPEEDING_UP_TOLERANCE`]
-    /// times half the sleep window, `⌊(sleep_steps − 1)/2⌋` steps (7 mm/s at the defaults). A
-    /// body gathering more than the tolerance every step passes it within half the window,
-    /// and from then on every step resets its counter, so it still never falls asleep; below
-    /// it, a speed's rise and fall from step to step is the solver's noise in a resting pile
-    /// (three balls of a settled gas traded velocities of 0.1–1.4 mm/s and stayed awake for
-    /// good).
+    /// The speed, m/s, below which a body's speeding up does not keep it awake (SPEC.md
+    /// §5.4): [`SPEEDING_UP_TOLERANCE`] times half the sleep window, `⌊(sleep_steps − 1)/2⌋`
+    /// steps (7 mm/s at the defaults). A body gathering more than the tolerance every step
+    /// passes it within half the window, and from then on every step resets its counter, so
+    /// it still never falls asleep; below it, a speed's rise and fall from step to step is
+    /// the solver's noise in a resting pile (three balls of a settled gas traded velocities
+    /// of 0.1–1.4 mm/s and stayed awake for good).
     pub fn speeding_up_floor(&self) -> f32 {
         SPEEDING_UP_TOLERANCE * f32::from(self.sleep_limit().saturating_sub(1) / 2)
     }
