@@ -1027,7 +1027,7 @@ fn ball_into_box_held_by_wall(tilt: f32, box_density: f32, speed: f32) {
     );
 }
 
-/// Ball gases settling under gravity come to rest: every ball asleep within 20 s. These two
+/// Ball gases settling under gravity come to rest: every ball asleep within 20 s. These
 /// draws of the quality bench's gas (512 balls, restitution 0.5) never did while each body of
 /// a pile contact removed the pair's whole approach in its own solve (SPEC.md §5.3): two balls
 /// leaning on each other from two grooves rebounded from each other every other step. (They

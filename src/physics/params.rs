@@ -82,7 +82,8 @@ impl SolverParams {
     /// §5.4): [`SPEEDING_UP_TOLERANCE`] times half the sleep window, `⌊(sleep_steps − 1)/2⌋`
     /// steps (7 mm/s at the defaults). A body gathering more than the tolerance every step
     /// passes it within half the window, and from then on every step resets its counter, so
-    /// it still never falls asleep; below it, a speed's rise and fall from step to step is
+    /// from a counter of at most `sleep_steps − ⌊(sleep_steps − 1)/2⌋` it still never falls
+    /// asleep (SPEC.md §5.4 states the limit); below it, a speed's rise and fall from step to step is
     /// the solver's noise in a resting pile (three balls of a settled gas traded velocities
     /// of 0.1–1.4 mm/s and stayed awake for good).
     pub fn speeding_up_floor(&self) -> f32 {
