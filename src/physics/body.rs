@@ -384,5 +384,21 @@ mod tests {
             (l - long_axis * expected).norm() <= 1e-5 * expected,
             "L {l:?}, expected {expected} along {long_axis:?}"
         );
+        // A generic orientation and a spin off every principal axis, against `R·I·Rᵀ·ω`
+        // built from the rotation matrix (a turn of 90° about a principal axis cannot tell
+        // `R·I·Rᵀ` from `Rᵀ·I·R`).
+        let generic = UnitQuaternion::from_euler_angles(0.3, -0.7, 1.1);
+        let mut b = Body::new(2, shape, material, Vec3::zeros(), generic);
+        b.angvel = Vec3::new(1.0, -2.0, 0.5);
+        let (x, y, z) = (0.1f32 * 0.1, 0.2f32 * 0.2, 0.4f32 * 0.4);
+        let inertia =
+            nalgebra::Matrix3::from_diagonal(&(Vec3::new(y + z, x + z, x + y) * (64.0 / 3.0)));
+        let r = generic.to_rotation_matrix().into_inner();
+        let direct = r * inertia * r.transpose() * b.angvel;
+        let l = b.angular_momentum();
+        assert!(
+            (l - direct).norm() <= 1e-5 * direct.norm(),
+            "L {l:?}, R·I·Rᵀ·ω {direct:?}"
+        );
     }
 }
