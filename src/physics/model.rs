@@ -933,8 +933,8 @@ impl CellModel for RigidBodyModel {
                 // speed's rise is the solver's noise in a resting pile, and a body gathering
                 // speed passes the floor within half the sleep window. (Last: computed only
                 // for a body that is otherwise quiet.)
-                && !(next.linvel.norm() > self.params.speeding_up_floor()
-                    && next.speeds_up_from(own))
+                && !(next.speeds_up_from(own)
+                    && next.linvel.norm() > self.params.speeding_up_floor())
             {
                 own.rest_steps
                     .saturating_add(1)
