@@ -70,6 +70,8 @@ pub(crate) struct Edge {
     /// Whether the pair approaches faster than the resting speed (an impact, which takes
     /// part in the matching) rather than resting (resolved in every step with split masses).
     pub impact: bool,
+    /// The fastest closing point's approach speed, m/s.
+    pub fastest: f32,
 }
 
 /// A body pair in contact at step `t`, seen in canonical order (`a.id < b.id`).
@@ -198,6 +200,7 @@ impl PairContact {
         Some(Edge {
             key: (toi, self.a.id, self.b.id),
             impact: fastest > rest_speed,
+            fastest,
         })
     }
 

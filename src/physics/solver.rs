@@ -14,6 +14,7 @@ use super::body::Shape;
 use super::contact::{ContactPoint, ContactSet, SetRole};
 use super::frame::Frame;
 use super::friction::{coulomb, Tangent, Traction};
+use super::pair::PairEffect;
 use super::params::SolverParams;
 use super::rotation::integrate_rotation;
 use crate::math::{Quat, Vec3};
@@ -77,7 +78,8 @@ struct PositionRow {
     /// along the normal, partner included; for a pile contact the body's share of the
     /// overlap over its own generalised inverse mass (`s / w_i`, [`pile_share`]).
     inv_w: f32,
-    /// Gap at the predicted pose to the partner's point one substep ahead, m.
+    /// Gap at the predicted pose to the partner's point at the end of the substep
+    /// ([`partner_at`]), m.
     gap: f32,
 }
 
@@ -88,8 +90,11 @@ struct ImpactRow {
     rn: Vec3,
     /// `I⁻¹ (r × n)`: the spin a unit normal impulse adds.
     irn: Vec3,
-    /// Approach speed the gap allows within the substep, m/s.
+    /// Closing speed the gap allows within the substep, m/s ([`closing_allowance`]).
     gap_speed: f32,
+    /// The partner point's speed towards the body, `n·v_j` (0 against the environment and a
+    /// support), m/s.
+    towards: f32,
     /// A pile contact's split (SPEC.md §5.3): the share of the start's deficit the body
     /// removes itself ([`pile_share`]); 1 for other sets.
     share: f32,
@@ -200,6 +205,84 @@ fn mobility(sets: &[ContactSet], n: &Vec3) -> f32 {
         }
     }
     f
+}
+
+/// Pile contacts let pass the approach the body's pairs gave it at the start of the step
+/// (SPEC.md §5.3): the partner of each pile point is taken to move away from the body along
+/// the normal as fast as the pairs drove the body towards it (`n·v_j + min(n·(Δv + Δω × r),
+/// 0)`), in every pass. That approach is the next step's, between the two bodies as a pair
+/// or a pile contact, which conserves momentum; the partner, solving from step-`t` states,
+/// cannot see it. (Stopped in the body's solve, it went to the ground: a ball struck into a
+/// resting row stopped, and a ball rolling at 2 m/s into five resting balls stopped dead.)
+/// `None` if no pile point is driven towards its partner (the sets are used as they are).
+fn passing_pile_sets(
+    body: &Body,
+    pairs: &PairEffect,
+    sets: &[ContactSet],
+) -> Option<Vec<ContactSet>> {
+    if pairs.dv == Vec3::zeros() && pairs.dw == Vec3::zeros() {
+        return None;
+    }
+    let rot = body.rotation.to_rotation_matrix().into_inner();
+    let passed = |cp: &ContactPoint| {
+        let r = offset(body, &rot, cp);
+        cp.normal.dot(&(pairs.dv + pairs.dw.cross(&r))).min(0.0)
+    };
+    let driven = sets
+        .iter()
+        .any(|set| set.role == SetRole::Pile && set.points.iter().any(|cp| passed(cp) < 0.0));
+    if !driven {
+        return None;
+    }
+    Some(
+        sets.iter()
+            .map(|set| {
+                let mut set = set.clone();
+                if set.role == SetRole::Pile {
+                    for cp in &mut set.points {
+                        cp.partner_velocity += cp.normal * passed(cp);
+                    }
+                }
+                set
+            })
+            .collect(),
+    )
+}
+
+/// Where body `i`'s solve holds a partner's point at the end of substep `through` (counted
+/// from 1; SPEC.md §5.3, "The per-body solve"). A support or the static environment: its
+/// step-`t` point advanced by one substep of its step-`t` velocity, whatever the substep (a
+/// support's downward velocity may be stopped in its own solve; holding it keeps `i` from
+/// following it into the ground). A movable partner beside `i` (pile, carried and paired
+/// sets): advanced by `through` substeps, so `i` can follow a partner that moves on through
+/// the step (held after the first substep, a ball pushed along with its neighbour at
+/// 0.5 m/s was stopped against it every step and kept only 0.325 m/s; a cube, 0).
+fn partner_at(role: SetRole, cp: &ContactPoint, h: f32, through: u32) -> Vec3 {
+    match role {
+        SetRole::Whole => cp.partner_point + cp.partner_velocity * h,
+        _ => cp.partner_point + cp.partner_velocity * (h * through as f32),
+    }
+}
+
+/// How fast body `i` may close a contact point's gap within a substep, and how fast the
+/// partner's point moves towards `i` (`n·v_j`); the impact pass's target for `i`'s normal
+/// velocity is `min(towards − allowance, 0)` (`allowance` at most `landing_speed` for a held
+/// set). Against the static environment and a support: `towards = 0` and the allowance closes
+/// the gap `gap0` at the end of the substep (the partner where [`partner_at`] holds it). Beside
+/// a movable partner the allowance is relative to the partner: the gap at the start of the
+/// substep, never less than 0, so `i` follows a partner that moves away (at most as fast as
+/// it), an overlap is the position pass's to remove, and a partner's approach is the partner's
+/// to stop. (Absolute, a ball touching a neighbour that moved away at 0.5 m/s was held to
+/// the landing speed, 0.3 m/s, in every step and kept only 0.45 of it.)
+fn closing_allowance(role: SetRole, cp: &ContactPoint, gap0: f32, h: f32) -> (f32, f32) {
+    match role {
+        SetRole::Whole => (0.0, gap0.max(0.0) / h),
+        _ => {
+            let towards = cp.normal.dot(&cp.partner_velocity);
+            let gap_start = gap0 + towards * h;
+            (towards, gap_start.max(0.0) / h)
+        }
+    }
 }
 
 /// The share of a pile contact's approach (or overlap) that the body removes itself (SPEC.md
@@ -369,9 +452,12 @@ impl SolveRows {
 }
 
 /// Advances `body` by one step of `dt` seconds against the contact sets (ascending partner
-/// id, static environment last). Returns the new state (velocities and pose).
+/// id, static environment last). `body` carries its symmetric pairs' velocity changes,
+/// `pairs` (SPEC.md §5.3); a pile contact measures from the velocity before them. Returns the
+/// new state (velocities and pose).
 pub(crate) fn solve_body(
     body: &Body,
+    pairs: &PairEffect,
     sets: &[ContactSet],
     gravity: Vec3,
     dt: f32,
@@ -392,6 +478,8 @@ pub(crate) fn solve_body(
         }
         return b;
     }
+    let passing = passing_pile_sets(body, pairs, sets);
+    let sets: &[ContactSet] = passing.as_deref().unwrap_or(sets);
     let count: usize = sets.iter().map(|s| s.points.len()).sum();
     rows.reset(count, sets.len());
     let SolveRows {
@@ -423,7 +511,7 @@ pub(crate) fn solve_body(
         Vec::new()
     };
 
-    for _ in 0..n_sub {
+    for sub in 0..n_sub {
         // Start of the substep: offsets, approach speeds (for restitution).
         let f0 = Frame::new(&b, &b.rotation);
         let mut k = 0;
@@ -457,7 +545,7 @@ pub(crate) fn solve_body(
             let mut engaged = false;
             for cp in &set.points {
                 let r = offsets[k];
-                let pj = cp.partner_point + cp.partner_velocity * h;
+                let pj = partner_at(set.role, cp, h, sub + 1);
                 let gap0 = cp.normal.dot(&(b.position + r - pj));
                 let vn = cp.normal.dot(&(b.linvel + b.angvel.cross(&r)));
                 engaged |= gap0 + vn * h < 0.0;
@@ -465,6 +553,7 @@ pub(crate) fn solve_body(
                 let irn = f0.spin(&rn);
                 let w_own = f0.inv_mass + rn.dot(&irn);
                 let pile = set.role == SetRole::Pile;
+                let (towards, gap_speed) = closing_allowance(set.role, cp, gap0, h);
                 let w = if pile {
                     w_own
                 } else {
@@ -475,7 +564,8 @@ pub(crate) fn solve_body(
                     irn,
                     w,
                     inv_w: 1.0 / w,
-                    gap_speed: gap0.max(0.0) / h,
+                    towards,
+                    gap_speed,
                     share: if pile {
                         pile_share(mobilities[k], w_own, cp.partner_inv_mass)
                     } else {
@@ -518,7 +608,7 @@ pub(crate) fn solve_body(
                     let row = &impact[k];
                     // n·(v + ω × r) = n·v + ω·(r × n).
                     let vn = cp.normal.dot(&b.linvel) + b.angvel.dot(&row.rn);
-                    let target = -row.gap_speed.min(limit);
+                    let target = (row.towards - row.gap_speed.min(limit)).min(0.0);
                     // A pile contact: the partner, solving the same contact in its own solve
                     // from the same step-`t` states, removes its share of the approach the
                     // two had at the start of the step; the approach this body gains within
@@ -642,7 +732,7 @@ pub(crate) fn solve_body(
                 let r0 = offset(&b, &fp.rot, cp);
                 let rn = r0.cross(&cp.normal);
                 let irn = fp.spin(&rn);
-                let pj = cp.partner_point + cp.partner_velocity * h;
+                let pj = partner_at(set.role, cp, h, sub + 1);
                 position[k + m] = PositionRow {
                     offset: r0,
                     irn,
