@@ -8,6 +8,7 @@ mod event;
 mod frame;
 mod free_rotation;
 mod friction;
+mod initial_depth;
 pub mod metrics;
 mod model;
 mod pair;

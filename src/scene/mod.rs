@@ -243,10 +243,13 @@ impl Scene {
         )
     }
 
-    /// The bodies' initial states, sorted by id.
+    /// The bodies' initial states, sorted by id, with the support depths of bodies placed
+    /// resting on the environment or on each other (SPEC.md §5.2): a stack placed at rest
+    /// stands from its first step.
     pub fn initial_bodies(&self) -> Vec<Body> {
         let mut v: Vec<Body> = self.bodies.iter().map(BodySpec::to_body).collect();
         v.sort_by_key(|b| b.id());
+        self.model().set_initial_support_depths(&mut v);
         v
     }
 }
