@@ -5,10 +5,11 @@
 //! bodies it rests on at step `t` (1 on the ground), so it spreads up a stack one body per
 //! step. A scene's bodies start at depth 0; a column of 15 unit cubes placed touching at rest
 //! had its layers stopped one step after the one below, the layers above fell meanwhile, and
-//! at step 14 the cubes overlapped by 29 cm. Computing the depths of the initial state to
-//! their fixed point (a breadth-first search from the bodies that rest on the environment,
+//! at step 14 the cubes overlapped by 29 cm. Computing the resting depths of the initial state
+//! to their fixed point (a breadth-first search from the bodies that rest on the environment,
 //! over the same support test as a step) starts such a stack as it would be after it had
-//! stood for as many steps as it is high.
+//! stood for as many steps as it is high. Landing depths (a body just above a support, within
+//! twice its reach but not touching) are left to the first step, as in a run.
 
 use super::body::{Body, LEAVING};
 use super::contact::{
@@ -46,7 +47,9 @@ impl RigidBodyModel {
             .iter()
             .map(Body::bounding_radius)
             .fold(0.0f32, f32::max);
-        let edge = 2.0 * largest + cap;
+        // (Padded by a thousandth: two bodies at exactly the largest contact distance must not
+        // fall two cells apart by rounding.)
+        let edge = (2.0 * largest + cap) * 1.001;
         let mut keyed: Vec<([i64; 3], usize)> = bodies
             .iter()
             .enumerate()
@@ -82,7 +85,11 @@ impl RigidBodyModel {
             for dx in -1..=1 {
                 for dy in -1..=1 {
                     for dz in -1..=1 {
-                        let key = [c[0] + dx, c[1] + dy, c[2] + dz];
+                        let key = [
+                            c[0].saturating_add(dx),
+                            c[1].saturating_add(dy),
+                            c[2].saturating_add(dz),
+                        ];
                         let start = keyed.partition_point(|e| e.0 < key);
                         for &(kk, j) in &keyed[start..] {
                             if kk != key {
@@ -103,10 +110,10 @@ impl RigidBodyModel {
                             let Some(m) = pair_manifold(a, b, reach, keep) else {
                                 continue;
                             };
-                            let c = m.normal_ab.dot(&up);
-                            if c > SUPPORT_COSINE {
+                            let cos = m.normal_ab.dot(&up);
+                            if cos > SUPPORT_COSINE {
                                 above[k].push(j);
-                            } else if c < -SUPPORT_COSINE {
+                            } else if cos < -SUPPORT_COSINE {
                                 above[j].push(k);
                             }
                         }

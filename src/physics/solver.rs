@@ -260,7 +260,9 @@ fn passing_pile_sets(
 fn partner_at(role: SetRole, cp: &ContactPoint, h: f32, through: u32) -> Vec3 {
     match role {
         SetRole::Whole => cp.partner_point + cp.partner_velocity * h,
-        _ => cp.partner_point + cp.partner_velocity * (h * through as f32),
+        SetRole::Pile | SetRole::Carried | SetRole::Paired => {
+            cp.partner_point + cp.partner_velocity * (h * through as f32)
+        }
     }
 }
 
@@ -273,11 +275,12 @@ fn partner_at(role: SetRole, cp: &ContactPoint, h: f32, through: u32) -> Vec3 {
 /// substep, never less than 0, so `i` follows a partner that moves away (at most as fast as
 /// it), an overlap is the position pass's to remove, and a partner's approach is the partner's
 /// to stop. (Absolute, a ball touching a neighbour that moved away at 0.5 m/s was held to
-/// the landing speed, 0.3 m/s, in every step and kept only 0.45 of it.)
+/// the landing speed, 0.3 m/s, in every step and moved on at 0.45 m/s beside the neighbour's
+/// 0.5 m/s.)
 fn closing_allowance(role: SetRole, cp: &ContactPoint, gap0: f32, h: f32) -> (f32, f32) {
     match role {
         SetRole::Whole => (0.0, gap0.max(0.0) / h),
-        _ => {
+        SetRole::Pile | SetRole::Carried | SetRole::Paired => {
             let towards = cp.normal.dot(&cp.partner_velocity);
             let gap_start = gap0 + towards * h;
             (towards, gap_start.max(0.0) / h)
@@ -453,7 +456,8 @@ impl SolveRows {
 
 /// Advances `body` by one step of `dt` seconds against the contact sets (ascending partner
 /// id, static environment last). `body` carries its symmetric pairs' velocity changes,
-/// `pairs` (SPEC.md §5.3); a pile contact measures from the velocity before them. Returns the
+/// `pairs` (SPEC.md §5.3); a pile contact lets their approach towards its partner pass (the
+/// partner taken to move away as fast, [`passing_pile_sets`]). Returns the
 /// new state (velocities and pose).
 pub(crate) fn solve_body(
     body: &Body,
