@@ -12,9 +12,7 @@
 //! twice its reach but not touching) are left to the first step, as in a run.
 
 use super::body::{Body, LEAVING};
-use super::contact::{
-    environment_contacts, keep_distance, near, pair_manifold, speculative_distance,
-};
+use super::contact::{keep_distance, near, pair_manifold, speculative_distance};
 use super::model::{RigidBodyModel, SUPPORT_COSINE};
 use crate::math::Vec3;
 
@@ -65,21 +63,9 @@ impl RigidBodyModel {
                 continue;
             }
             let reach = speculative_distance(own, None, self.dt, g, margin, cap);
-            let radius = own.bounding_radius();
-            if let Some(env) = environment_contacts(
-                own,
-                &self.environment,
-                reach,
-                keep_distance(reach, radius, radius, cap),
-            ) {
-                if env
-                    .points
-                    .iter()
-                    .any(|p| p.normal.dot(&up) > SUPPORT_COSINE)
-                {
-                    depth[k] = 1;
-                    frontier.push(k);
-                }
+            if self.rests_on_environment(own, reach, own.bounding_radius(), up) {
+                depth[k] = 1;
+                frontier.push(k);
             }
             let c = cell_of(&own.position, edge);
             for dx in -1..=1 {

@@ -238,19 +238,8 @@ impl RigidBodyModel {
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
         let ahead = (2.0 * reach).min(cap);
         let radius = own.body.bounding_radius();
-        if let Some(env) = environment_contacts(
-            own.body,
-            &self.environment,
-            ahead,
-            keep_distance(ahead, radius, radius, cap),
-        ) {
-            if env
-                .points
-                .iter()
-                .any(|p| p.normal.dot(&up) > SUPPORT_COSINE)
-            {
-                return Some(1);
-            }
+        if self.rests_on_environment(own.body, ahead, radius, up) {
+            return Some(1);
         }
         let mut depth = u32::MAX;
         for c in candidates {
@@ -279,6 +268,23 @@ impl RigidBodyModel {
             }
         }
         (depth != u32::MAX).then_some(depth)
+    }
+
+    /// Whether the environment offers `body` a support within `distance`: a contact point whose
+    /// normal is within 75° of `up` (SPEC.md §5.2).
+    pub(crate) fn rests_on_environment(
+        &self,
+        body: &Body,
+        distance: f32,
+        radius: f32,
+        up: Vec3,
+    ) -> bool {
+        let keep = keep_distance(distance, radius, radius, self.prediction());
+        environment_contacts(body, &self.environment, distance, keep).is_some_and(|env| {
+            env.points
+                .iter()
+                .any(|p| p.normal.dot(&up) > SUPPORT_COSINE)
+        })
     }
 
     /// The manifold of `a` (lower id) and `b` within `reach`, computed once per cell.
