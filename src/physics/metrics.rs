@@ -7,17 +7,19 @@ use super::environment::Environment;
 use crate::math::Vec3;
 use parry3d::query;
 
-/// Total kinetic energy, summed in the given (id) order.
+/// Total kinetic energy, summed in the given (id) order from +0 (`Iterator::sum` of floats
+/// starts at −0, and an empty scene printed `kinetic energy -0.0000 J`).
 pub fn kinetic_energy<'a>(bodies: impl IntoIterator<Item = &'a Body>) -> f64 {
-    bodies.into_iter().map(|b| b.kinetic_energy() as f64).sum()
+    bodies
+        .into_iter()
+        .fold(0.0, |sum, b| sum + b.kinetic_energy() as f64)
 }
 
 /// Potential energy relative to height 0 under `gravity`.
 pub fn potential_energy<'a>(bodies: impl IntoIterator<Item = &'a Body>, gravity: Vec3) -> f64 {
-    bodies
-        .into_iter()
-        .map(|b| -(b.mass() * gravity.dot(&b.position)) as f64)
-        .sum()
+    bodies.into_iter().fold(0.0, |sum, b| {
+        sum - (b.mass() * gravity.dot(&b.position)) as f64
+    })
 }
 
 /// Largest linear speed.
@@ -62,5 +64,19 @@ pub fn pair_penetration(a: &Body, b: &Body) -> f32 {
     match query::contact(&a.pose(), sa.as_dyn(), &b.pose(), sb.as_dyn(), 0.0) {
         Ok(Some(c)) => (-c.dist).max(0.0),
         _ => 0.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn energies_of_no_bodies_are_positive_zero() {
+        let none: [Body; 0] = [];
+        let k = kinetic_energy(none.iter());
+        let p = potential_energy(none.iter(), Vec3::new(0.0, -9.81, 0.0));
+        assert!(k == 0.0 && k.is_sign_positive(), "kinetic {k}");
+        assert!(p == 0.0 && p.is_sign_positive(), "potential {p}");
     }
 }
