@@ -33,11 +33,10 @@ impl RigidBodyModel {
     /// nothing rests on anything and the depths are left as they are. A pure function of the
     /// bodies (their order does not matter), so every executor starts from the same bits.
     pub fn set_initial_support_depths(&self, bodies: &mut [Body]) {
-        let g = self.gravity.norm();
-        if g <= 0.0 || bodies.is_empty() {
+        let Some(up) = self.up().filter(|_| !bodies.is_empty()) else {
             return;
-        }
-        let up = -self.gravity / g;
+        };
+        let g = self.gravity.norm();
         let cap = self.prediction();
         let margin = self.params.margin;
         // Candidate pairs from a uniform hash whose edge covers any two touching bodies.
@@ -63,7 +62,7 @@ impl RigidBodyModel {
                 continue;
             }
             let reach = speculative_distance(own, None, self.dt, g, margin, cap);
-            if self.rests_on_environment(own, reach, own.bounding_radius(), up) {
+            if self.rests_on_environment(own, reach) {
                 depth[k] = 1;
                 frontier.push(k);
             }

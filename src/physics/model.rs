@@ -231,14 +231,13 @@ impl RigidBodyModel {
     /// (depth 1), or of a body with depth `k > 0` that would carry it as a support (depth
     /// `k + 1`, the least such). `None` without gravity or if there is no such partner.
     fn landing_depth(&self, own: &Candidate<'_>, candidates: &[Candidate<'_>]) -> Option<u32> {
-        let up = self.up()?;
+        self.up()?; // No landing without gravity.
         let cap = self.prediction();
         let (g, margin) = (self.gravity.norm(), self.params.margin);
         let slack = self.filter_slack();
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
         let ahead = (2.0 * reach).min(cap);
-        let radius = own.body.bounding_radius();
-        if self.rests_on_environment(own.body, ahead, radius, up) {
+        if self.rests_on_environment(own.body, ahead) {
             return Some(1);
         }
         let mut depth = u32::MAX;
@@ -271,14 +270,12 @@ impl RigidBodyModel {
     }
 
     /// Whether the environment offers `body` a support within `distance`: a contact point whose
-    /// normal is within 75° of `up` (SPEC.md §5.2).
-    pub(crate) fn rests_on_environment(
-        &self,
-        body: &Body,
-        distance: f32,
-        radius: f32,
-        up: Vec3,
-    ) -> bool {
+    /// normal is within 75° of up (SPEC.md §5.2). Never without gravity.
+    pub(crate) fn rests_on_environment(&self, body: &Body, distance: f32) -> bool {
+        let Some(up) = self.up() else {
+            return false;
+        };
+        let radius = body.bounding_radius();
         let keep = keep_distance(distance, radius, radius, self.prediction());
         environment_contacts(body, &self.environment, distance, keep).is_some_and(|env| {
             env.points
@@ -324,7 +321,7 @@ impl RigidBodyModel {
     }
 
     /// The unit vector against gravity, if there is gravity.
-    fn up(&self) -> Option<Vec3> {
+    pub(crate) fn up(&self) -> Option<Vec3> {
         let g = self.gravity.norm();
         (g > 0.0).then(|| -self.gravity / g)
     }
