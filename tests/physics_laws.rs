@@ -1700,3 +1700,132 @@ proptest! {
         }
     }
 }
+
+/// An elastic (restitution 1), frictionless box of any proportions, thrown and spun in a
+/// closed box without gravity, with `substeps` substeps per step: its state after every step.
+fn elastic_box_in_a_box(
+    half: [f32; 3],
+    rotation: [f32; 3],
+    velocity: [f32; 3],
+    spin: [f32; 3],
+    substeps: u32,
+    steps: u32,
+) -> Result<Vec<Body>, String> {
+    let body = BodySpec {
+        id: 0,
+        shape: Shape::Cuboid { half_extents: half },
+        material: Material {
+            density: 1.0,
+            friction: 0.0,
+            restitution: 1.0,
+        },
+        position: [0.0; 3],
+        rotation,
+        velocity,
+        angular_velocity: spin,
+    };
+    let solver = soda::physics::SolverParams {
+        substeps,
+        ..Default::default()
+    };
+    let scene = SceneBuilder::new([-1.2; 3], [1.2; 3])
+        .gravity([0.0; 3])
+        .ground(Some(-1.2))
+        .walls(true, true)
+        .environment_material(0.0, 1.0)
+        .solver(solver)
+        .body_spec(body)
+        .build()
+        .unwrap();
+    never_gains_kinetic_energy(scene, steps)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// An elastic, frictionless box spinning into the walls, floor and ceiling of a closed
+    /// box never gains kinetic energy from one step to the next (beyond f32 rounding), with
+    /// any proportions, pose, spin and number of substeps (SPEC.md §5.3, restitution with
+    /// several points). It gained 5 % in one step when two corners reached a ceiling within
+    /// one substep (the impact pass's impulse at the corner the other lifted was kept on top
+    /// of its restitution), and 0.5 % when a position correction's velocity was added to a
+    /// corner's rebound.
+    #[test]
+    fn an_elastic_box_never_gains_energy_on_the_walls_of_its_box(
+        half in prop::array::uniform3(0.05f32..0.35),
+        rotation in prop::array::uniform3(-3.1f32..3.1),
+        velocity in prop::array::uniform3(-3.0f32..3.0),
+        spin in prop::array::uniform3(-12.0f32..12.0),
+        substeps in 1u32..=4,
+    ) {
+        let result = elastic_box_in_a_box(half, rotation, velocity, spin, substeps, 150);
+        prop_assert!(result.is_ok(), "{}", result.unwrap_err());
+    }
+
+    /// Two elastic, frictionless boxes of any proportions, spinning, meet in free space:
+    /// the pair's kinetic energy never grows from one step to the next (beyond f32
+    /// rounding), and momentum is kept. The compression of a face against a face was left
+    /// unconverged by the pair's sweeps (its corners' rows are nearly dependent), a corner
+    /// kept pushing while it separated, and an elastic pair of cubes gained up to 2 % in
+    /// one impact; such a compression is now solved exactly (SPEC.md §5.3).
+    #[test]
+    fn an_elastic_pair_of_boxes_never_gains_energy(
+        half_a in prop::array::uniform3(0.1f32..0.4),
+        half_b in prop::array::uniform3(0.1f32..0.4),
+        rotation_a in prop::array::uniform3(-3.1f32..3.1),
+        rotation_b in prop::array::uniform3(-3.1f32..3.1),
+        spin_a in prop::array::uniform3(-10.0f32..10.0),
+        spin_b in prop::array::uniform3(-10.0f32..10.0),
+        speed in 0.5f32..5.0,
+        lateral in prop::array::uniform2(-0.15f32..0.15),
+    ) {
+        let elastic = Material { density: 1.0, friction: 0.0, restitution: 1.0 };
+        let body = |id, half, rotation, position, velocity, spin| BodySpec {
+            id,
+            shape: Shape::Cuboid { half_extents: half },
+            material: elastic,
+            position,
+            rotation,
+            velocity,
+            angular_velocity: spin,
+        };
+        let scene = free_space()
+            .body_spec(body(0, half_a, rotation_a, [-0.8, 0.0, 0.0], [speed, 0.0, 0.0], spin_a))
+            .body_spec(body(1, half_b, rotation_b, [0.8, lateral[0], lateral[1]], [-speed, 0.0, 0.0], spin_b))
+            .build()
+            .unwrap();
+        let steps = (1.6 / (2.0 * speed) / scene.dt).ceil() as u32 + 30;
+        let first = bodies(&Simulation::new(scene.clone()));
+        let result = never_gains_kinetic_energy(scene, steps);
+        prop_assert!(result.is_ok(), "{}", result.as_ref().unwrap_err());
+        let last = result.unwrap();
+        let (p0, p) = (momentum(&first), momentum(&last));
+        let scale = momentum_scale(&first);
+        prop_assert!(distance(p, p0) <= 1e-4 * scale, "momentum {:?} from {:?} (scale {})", p, p0, scale);
+        prop_assert!((relative_velocity(&last) - relative_velocity(&first)).norm() > 1e-3, "no collision happened");
+    }
+}
+
+/// An elastic, frictionless gas of balls and boxes in a closed box never gains kinetic
+/// energy from one step to the next (beyond f32 rounding), and loses at most 2 % over 1,000
+/// steps (measured 2026-11-28: 0.4 % and 1.2 % for these seeds; an elastic gas of balls
+/// alone keeps it within 1e-7, so the boxes' contacts still dissipate a little). (It gained 3 % in 2,000 steps before the fixes named in
+/// [`an_elastic_box_never_gains_energy_on_the_walls_of_its_box`] and
+/// [`an_elastic_pair_of_boxes_never_gains_energy`].)
+#[test]
+fn an_elastic_gas_of_balls_and_boxes_never_gains_energy() {
+    for seed in [7, 8] {
+        let scene = ball_gas(216, seed, 1.0, 0.0, true, true);
+        let e0 = kinetic(&bodies(&Simulation::new(scene.clone())));
+        match never_gains_kinetic_energy(scene, 1000) {
+            Err(grew) => panic!("seed {seed}: {grew}"),
+            Ok(last) => {
+                let e = kinetic(&last);
+                assert!(
+                    (e - e0).abs() <= 0.02 * e0,
+                    "seed {seed}: kinetic energy {e} J from {e0} J"
+                );
+            }
+        }
+    }
+}

@@ -9,6 +9,7 @@ mod frame;
 mod free_rotation;
 mod friction;
 mod initial_depth;
+mod lcp;
 pub mod metrics;
 mod model;
 mod pair;

@@ -8,6 +8,7 @@
 
 use super::body::{Body, Shape};
 use super::contact::PairManifold;
+use super::lcp;
 use crate::math::{Quat, Vec3};
 use nalgebra::Matrix3;
 use smallvec::SmallVec;
@@ -144,6 +145,43 @@ fn normal_speed(n: &Vec3, p: &PairPoint, va: &Vec3, wa: &Vec3, vb: &Vec3, wb: &V
     n.dot(&(vb + wb.cross(&p.rb) - va - wa.cross(&p.ra)))
 }
 
+/// The compression impulses of a pair's closing points, solved together
+/// ([`lcp::contact_impulses`]): per point of `points`, 0 where not closing. `None` if more
+/// than eight points close or the exact solve fails (the sweeps' impulses stand).
+fn exact_compression(
+    a: &Side,
+    b: &Side,
+    n: &Vec3,
+    points: &[PairPoint],
+    closing: &[bool],
+    rows: &[(Vec3, Vec3, f32)],
+) -> Option<SmallVec<[f32; 4]>> {
+    let at: SmallVec<[usize; 8]> = (0..points.len()).filter(|&k| closing[k]).collect();
+    if at.len() > lcp::MAX_POINTS {
+        return None;
+    }
+    let mut k = lcp::LcpMatrix::zeros();
+    let mut u = lcp::LcpVector::zeros();
+    for (x, &px) in at.iter().enumerate() {
+        u[x] = f64::from(points[px].speed);
+        let ran = points[px].ra.cross(n).cast::<f64>();
+        let rbn = points[px].rb.cross(n).cast::<f64>();
+        for (y, &py) in at.iter().enumerate() {
+            let (ia, ib, _) = rows[py];
+            k[(x, y)] = f64::from(a.inv_mass)
+                + f64::from(b.inv_mass)
+                + ran.dot(&ia.cast::<f64>())
+                + rbn.dot(&ib.cast::<f64>());
+        }
+    }
+    let lambda = lcp::contact_impulses(&k, &u, at.len())?;
+    let mut out: SmallVec<[f32; 4]> = SmallVec::from_elem(0.0, points.len());
+    for (x, &px) in at.iter().enumerate() {
+        out[px] = lambda[x] as f32;
+    }
+    Some(out)
+}
+
 impl PairContact {
     /// The pair contact of `a` (lower id) and `b` from their manifold at step `t`, with
     /// combined `friction` and `restitution`, over a step of `dt` seconds.
@@ -251,6 +289,7 @@ impl PairContact {
                     *va -= n * (d * a.inv_mass);
                     *wa -= ia * d;
                 };
+            let mut converged = false;
             for _ in 0..PAIR_ITERATIONS {
                 let mut largest = 0.0f32;
                 for (k, p) in self.points.iter().enumerate() {
@@ -267,7 +306,21 @@ impl PairContact {
                     }
                 }
                 if largest < PAIR_TOLERANCE {
+                    converged = true;
                     break;
+                }
+            }
+            // Sweeps that did not converge leave a point pushing while it separates, which
+            // restitution then doubles: solved exactly instead (SPEC.md §5.3).
+            if !converged {
+                if let Some(exact) = exact_compression(a, b, &n, &self.points, &closing, &rows) {
+                    (va, wa, vb, wb) = (a.v, a.w, b.v, b.w);
+                    for (k, l) in exact.iter().enumerate() {
+                        acc[k] = *l;
+                        if *l != 0.0 {
+                            push(*l, k, &mut va, &mut wa, &mut vb, &mut wb);
+                        }
+                    }
                 }
             }
             // Restitution (Poisson): each point's compression impulse again, times `e`, once
