@@ -335,6 +335,20 @@ impl Body {
         )
     }
 
+    /// Spin `w` carried along when the body is turned from `from` to `to` by something other
+    /// than its own rotation (a correction of its pose): turned by `to·from⁻¹`, so it keeps its
+    /// body-frame axis and the rotational energy `½ωᵀIω` it had at `from` (turning the body
+    /// alone changes that energy, SPEC.md §5.3). A body whose principal inertias are equal
+    /// has the same energy in every orientation: its spin is returned as it is (same bits,
+    /// and its angular momentum is kept).
+    pub(crate) fn carry_spin(&self, from: &Quat, to: &Quat, w: Vec3) -> Vec3 {
+        if self.props().isotropic() {
+            w
+        } else {
+            (to * from.inverse()) * w
+        }
+    }
+
     /// Mass in kg.
     pub fn mass(&self) -> f32 {
         1.0 / self.inv_mass()

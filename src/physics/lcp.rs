@@ -6,10 +6,17 @@
 //! a face against another face: their rows are nearly dependent), and a compression left
 //! unconverged is not complementary: a point keeps an impulse while it separates. Poisson
 //! restitution then pushes it again, and an elastic pair of cubes gained up to 2 % of its
-//! energy in one impact. The callers run their sweeps first and come here only if the sweeps
-//! did not converge, so every converged solve keeps its bits.
+//! energy in one impact. A pair runs its sweeps first and comes here only if they did not
+//! converge, so every converged pair keeps its bits; restitution's compression in the
+//! per-body solve (a rare event: a set that bounces) always comes here first.
 
 use nalgebra::{SMatrix, SVector};
+use smallvec::SmallVec;
+
+/// A contact matrix is regularised by this fraction of its largest diagonal before it is
+/// solved (here and in the per-body solve's face block): positive definite, with the
+/// least-norm solution for a singular matrix (a face pushed evenly).
+pub(crate) const REGULARISATION: f64 = 1e-6;
 
 /// A problem's coupled inverse-mass matrix (the first `m` rows and columns used).
 pub(crate) type LcpMatrix = SMatrix<f64, MAX_POINTS, MAX_POINTS>;
@@ -55,7 +62,7 @@ pub(crate) fn contact_impulses(
     let regularised = {
         let mut r = *k;
         for a in 0..m {
-            r[(a, a)] += 1e-6 * largest;
+            r[(a, a)] += REGULARISATION * largest;
         }
         r
     };
@@ -98,6 +105,46 @@ pub(crate) fn contact_impulses(
         }
     }
     None
+}
+
+/// [`contact_impulses`] for the points `at` of a caller's `len` points (their indices, at
+/// most [`MAX_POINTS`]): `coupling(i, j)` and `speed(i)` give the matrix entries and normal
+/// velocities by the caller's indices, and `applied(j)` the impulses already contained in
+/// `speed`, taken back out (`u_i = speed(i) − Σ_j coupling(i, j)·applied(j)`, in `at`'s
+/// order). Returns an impulse per caller point, 0 for those not in `at`; `None` if `at` is
+/// empty or too long, or the solve fails.
+pub(crate) fn impulses_at(
+    at: &[usize],
+    len: usize,
+    coupling: impl Fn(usize, usize) -> f64,
+    speed: impl Fn(usize) -> f64,
+    applied: impl Fn(usize) -> f64,
+) -> Option<SmallVec<[f32; MAX_POINTS]>> {
+    if at.is_empty() || at.len() > MAX_POINTS {
+        return None;
+    }
+    let mut k = LcpMatrix::zeros();
+    let mut u = LcpVector::zeros();
+    for (x, &i) in at.iter().enumerate() {
+        for (y, &j) in at.iter().enumerate() {
+            k[(x, y)] = coupling(i, j);
+        }
+        u[x] = speed(i);
+    }
+    for x in 0..at.len() {
+        for (y, &j) in at.iter().enumerate() {
+            let already = applied(j);
+            if already != 0.0 {
+                u[x] -= k[(x, y)] * already;
+            }
+        }
+    }
+    let lambda = contact_impulses(&k, &u, at.len())?;
+    let mut out: SmallVec<[f32; MAX_POINTS]> = smallvec::smallvec![0.0; len];
+    for (x, &i) in at.iter().enumerate() {
+        out[i] = lambda[x] as f32;
+    }
+    Some(out)
 }
 
 #[cfg(test)]
@@ -173,6 +220,22 @@ mod tests {
         k[(1, 0)] = 0.2;
         let u = vector(&[1.0, 0.5, 0.0, 0.0]);
         assert_eq!(contact_impulses(&k, &u, 2), Some([0.0; MAX_POINTS]));
+    }
+
+    #[test]
+    fn impulses_at_takes_back_what_was_applied_and_scatters_to_the_callers_points() {
+        // Points 0 and 2 of three, uncoupled, unit matrix: point 0 approaches at 1 m/s after
+        // an impulse of 0.5 was applied (so 1.5 before it), point 2 at 2 m/s.
+        let coupling = |i: usize, j: usize| if i == j { 1.0 } else { 0.0 };
+        let speed = |i: usize| if i == 0 { -1.0 } else { -2.0 };
+        let applied = |j: usize| if j == 0 { 0.5 } else { 0.0 };
+        let l = impulses_at(&[0, 2], 3, coupling, speed, applied).unwrap();
+        assert_eq!(l.len(), 3);
+        assert!(
+            (l[0] - 1.5).abs() < 1e-5 && l[1] == 0.0 && (l[2] - 2.0).abs() < 1e-5,
+            "{l:?}"
+        );
+        assert_eq!(impulses_at(&[], 3, coupling, speed, applied), None);
     }
 
     #[test]

@@ -929,9 +929,7 @@ impl CellModel for RigidBodyModel {
                 // 47 rad/s struck by a ball). A body whose principal inertias are equal
                 // (a ball, a cube) has the same energy in every orientation: its spin is
                 // left as it is, and so is its angular momentum.
-                if !next.props().isotropic() {
-                    next.angvel = (next.rotation * before.inverse()) * next.angvel;
-                }
+                next.angvel = next.carry_spin(&before, &next.rotation, next.angvel);
             }
             assert_finite(&next, step);
             self.cap(own, &mut next, step, events);

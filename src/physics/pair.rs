@@ -155,31 +155,17 @@ fn exact_compression(
     points: &[PairPoint],
     closing: &[bool],
     rows: &[(Vec3, Vec3, f32)],
-) -> Option<SmallVec<[f32; 4]>> {
+) -> Option<SmallVec<[f32; lcp::MAX_POINTS]>> {
     let at: SmallVec<[usize; 8]> = (0..points.len()).filter(|&k| closing[k]).collect();
-    if at.len() > lcp::MAX_POINTS {
-        return None;
-    }
-    let mut k = lcp::LcpMatrix::zeros();
-    let mut u = lcp::LcpVector::zeros();
-    for (x, &px) in at.iter().enumerate() {
-        u[x] = f64::from(points[px].speed);
-        let ran = points[px].ra.cross(n).cast::<f64>();
-        let rbn = points[px].rb.cross(n).cast::<f64>();
-        for (y, &py) in at.iter().enumerate() {
-            let (ia, ib, _) = rows[py];
-            k[(x, y)] = f64::from(a.inv_mass)
-                + f64::from(b.inv_mass)
-                + ran.dot(&ia.cast::<f64>())
-                + rbn.dot(&ib.cast::<f64>());
-        }
-    }
-    let lambda = lcp::contact_impulses(&k, &u, at.len())?;
-    let mut out: SmallVec<[f32; 4]> = SmallVec::from_elem(0.0, points.len());
-    for (x, &px) in at.iter().enumerate() {
-        out[px] = lambda[x] as f32;
-    }
-    Some(out)
+    let coupling = |i: usize, j: usize| {
+        let (ia, ib, _) = rows[j];
+        f64::from(a.inv_mass)
+            + f64::from(b.inv_mass)
+            + points[i].ra.cross(n).cast::<f64>().dot(&ia.cast::<f64>())
+            + points[i].rb.cross(n).cast::<f64>().dot(&ib.cast::<f64>())
+    };
+    let speed = |i: usize| f64::from(points[i].speed);
+    lcp::impulses_at(&at, points.len(), coupling, speed, |_| 0.0)
 }
 
 impl PairContact {

@@ -372,7 +372,7 @@ fn face_impulses(inv_mass: f32, rows: &[FaceRow]) -> Option<[f32; 4]> {
         largest = largest.max(k[(a, a)]);
     }
     for a in 0..m {
-        k[(a, a)] += 1e-6 * largest;
+        k[(a, a)] += lcp::REGULARISATION * largest;
     }
     let lambda = k.cholesky()?.solve(&rhs);
     let mut out = [0.0f32; 4];
@@ -398,35 +398,22 @@ fn exact_compression(
     inv_mass: f32,
     v: &Vec3,
     w: &Vec3,
-) -> Option<smallvec::SmallVec<[f32; 8]>> {
+) -> Option<smallvec::SmallVec<[f32; lcp::MAX_POINTS]>> {
     let at: smallvec::SmallVec<[usize; 8]> = (0..points.len())
         .filter(|&m| scratch[m].impulse > 0.0)
         .collect();
-    if at.is_empty() || at.len() > lcp::MAX_POINTS {
-        return None;
-    }
-    let mut k = lcp::LcpMatrix::zeros();
-    let mut u = lcp::LcpVector::zeros();
-    for (x, &mx) in at.iter().enumerate() {
-        let nx = points[mx].normal.cast::<f64>();
-        for (y, &my) in at.iter().enumerate() {
-            k[(x, y)] = nx.dot(&points[my].normal.cast::<f64>()) * f64::from(inv_mass)
-                + rows[mx].rn.cast::<f64>().dot(&rows[my].irn.cast::<f64>());
-        }
-        u[x] = f64::from(points[mx].normal.dot(v) + w.dot(&rows[mx].rn));
-    }
+    let coupling = |i: usize, j: usize| {
+        points[i]
+            .normal
+            .cast::<f64>()
+            .dot(&points[j].normal.cast::<f64>())
+            * f64::from(inv_mass)
+            + rows[i].rn.cast::<f64>().dot(&rows[j].irn.cast::<f64>())
+    };
+    let speed = |i: usize| f64::from(points[i].normal.dot(v) + w.dot(&rows[i].rn));
     // The velocities before the impact impulses.
-    for x in 0..at.len() {
-        for (y, &my) in at.iter().enumerate() {
-            u[x] -= k[(x, y)] * f64::from(scratch[my].impulse);
-        }
-    }
-    let lambda = lcp::contact_impulses(&k, &u, at.len())?;
-    let mut out: smallvec::SmallVec<[f32; 8]> = smallvec::smallvec![0.0; points.len()];
-    for (x, &mx) in at.iter().enumerate() {
-        out[mx] = lambda[x] as f32;
-    }
-    Some(out)
+    let applied = |j: usize| f64::from(scratch[j].impulse);
+    lcp::impulses_at(&at, points.len(), coupling, speed, applied)
 }
 
 /// The face block (SPEC.md §5.3, step 3) of a box against the static environment: `row(k,
@@ -870,6 +857,7 @@ pub(crate) fn solve_body(
         // the turned orientation, an elastic brick's rebound gained 0.2 %. (A body whose
         // principal inertias are equal has the same energy in every orientation: left as
         // it is.)
+        let isotropic = body.props().isotropic();
         let (mut v_pred, mut w_pred) = (b.linvel, b.angvel);
         let mut bounce_dw = Vec3::zeros();
         let mut k = 0;
@@ -884,11 +872,7 @@ pub(crate) fn solve_body(
             }
         }
         if bounce_dw != Vec3::zeros() {
-            w_pred += if body.props().isotropic() {
-                bounce_dw
-            } else {
-                (qp * b.rotation.inverse()) * bounce_dw
-            };
+            w_pred += body.carry_spin(&b.rotation, &qp, bounce_dw);
         }
         // The velocity a correction adds may cancel the approach but never add kinetic
         // energy (split impulse: the positions take the whole correction, the velocities
@@ -910,8 +894,8 @@ pub(crate) fn solve_body(
         // energy the substep left it (turned alone, an elastic brick bouncing in a box gained
         // 1.9e-5 of its energy at a corner's correction); the cap is measured at `qp`,
         // before that turn. Equal inertias: the energy is the same in every orientation,
-        // and the spin is left as it is.
-        let isotropic = body.props().isotropic();
+        // and the spin is left as it is (and the cap measured at `q1`, as before the turn
+        // was added: the same value, and the same bits).
         let dw = cancelling_spin(
             body,
             if isotropic || dtheta == Vec3::zeros() {
@@ -927,8 +911,8 @@ pub(crate) fn solve_body(
         b.rotation = q1;
         b.linvel = v_pred + dv;
         b.angvel = w_pred + dw;
-        if !isotropic && dtheta != Vec3::zeros() {
-            b.angvel = (q1 * qp.inverse()) * b.angvel;
+        if dtheta != Vec3::zeros() {
+            b.angvel = body.carry_spin(&qp, &q1, b.angvel);
         }
 
         // Velocity pass: per point that pushed in this substep, remove approach velocity
