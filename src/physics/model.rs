@@ -317,6 +317,7 @@ impl RigidBodyModel {
             0.5 * (a.friction() + b.friction()),
             0.5 * (a.restitution() + b.restitution()),
             self.dt,
+            self.rest_speed(),
         )
     }
 
