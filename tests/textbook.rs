@@ -7,15 +7,25 @@
 
 use soda::math::Vec3;
 use soda::physics::metrics::{kinetic_energy, potential_energy};
-use soda::scene::{parse_scene, SceneFormat};
+use soda::physics::Shape;
+use soda::scene::load_scene_file;
 use soda::sim::Simulation;
 use soda::{Body, RigidBodyModel, Scene};
 
 /// The scene `tests/textbook/{name}.json`.
 fn scene(name: &str) -> Scene {
-    let path = format!("{}/tests/textbook/{name}.json", env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(&path).unwrap();
-    parse_scene(&text, SceneFormat::Json, &path).unwrap()
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/textbook")
+        .join(format!("{name}.json"));
+    load_scene_file(&path).unwrap()
+}
+
+/// The radius of a ball.
+fn radius(shape: Shape) -> f64 {
+    match shape {
+        Shape::Ball { radius } => radius as f64,
+        Shape::Cuboid { .. } => panic!("not a ball: {shape:?}"),
+    }
 }
 
 /// The bodies after every step, steps `1..=steps`, sorted by id.
@@ -33,9 +43,9 @@ fn run(scene: Scene, steps: u32) -> Vec<Vec<Body>> {
         .collect()
 }
 
-/// Mechanical energy (kinetic + potential, gravity along −y), J.
-fn mechanical_energy(b: &Body) -> f64 {
-    kinetic_energy([b]) + potential_energy([b], Vec3::new(0.0, -9.81, 0.0))
+/// Mechanical energy (kinetic + potential under `gravity`), J.
+fn mechanical_energy(b: &Body, gravity: [f32; 3]) -> f64 {
+    kinetic_energy([b]) + potential_energy([b], Vec3::from(gravity))
 }
 
 #[test]
@@ -45,8 +55,10 @@ fn a_ball_rolling_down_an_incline_rolls_on_the_flat_at_the_speed_angular_momentu
     // spin v/r; the ground takes the normal part, and friction brings it to rolling at the
     // speed that keeps its angular momentum about the contact point: v·(5·cos θ + 2)/7.
     let s = scene("incline_roll");
-    let g = 9.81f64;
-    let (theta, r) = (0.2f64, 0.2f64);
+    let g = -s.gravity[1] as f64;
+    // The incline is the scene's one static box, tilted about z.
+    let theta = s.environment.cuboids[0].rotation[2].abs() as f64;
+    let r = radius(s.bodies[0].shape);
     let y0 = s.bodies[0].position[1] as f64;
     let along = (10.0 / 7.0 * g * (y0 - r)).sqrt();
     let expected = along * (5.0 * theta.cos() + 2.0) / 7.0;
@@ -76,12 +88,13 @@ fn a_frictionless_rod_falling_from_nearly_upright_keeps_its_centre_on_the_vertic
     // straight down. It lands flat, and its mechanical energy never grows.
     let s = scene("rod_fall");
     let x0 = s.bodies[0].position[0];
-    let first = Simulation::new(s.clone())
-        .state()
-        .sorted::<RigidBodyModel>()
-        .into_iter()
-        .map(mechanical_energy)
-        .sum::<f64>();
+    let Shape::Cuboid { half_extents } = s.bodies[0].shape else {
+        panic!("the rod is a box");
+    };
+    // Lying flat on the ground, its centre is at its smallest half extent.
+    let flat = half_extents.into_iter().fold(f32::INFINITY, f32::min);
+    let gravity = s.gravity;
+    let first = mechanical_energy(&s.initial_bodies()[0], gravity);
     let states = run(s, 180);
     for (step, bodies) in states.iter().enumerate() {
         let rod = &bodies[0];
@@ -92,7 +105,7 @@ fn a_frictionless_rod_falling_from_nearly_upright_keeps_its_centre_on_the_vertic
             rod.position.x,
             rod.position.z
         );
-        let energy = mechanical_energy(rod);
+        let energy = mechanical_energy(rod, gravity);
         assert!(
             energy <= first * (1.0 + 1e-5),
             "step {}: mechanical energy {energy} J above the initial {first} J",
@@ -101,7 +114,7 @@ fn a_frictionless_rod_falling_from_nearly_upright_keeps_its_centre_on_the_vertic
     }
     let rod = &states.last().unwrap()[0];
     assert!(
-        (rod.position.y - 0.02).abs() < 1e-3,
+        (rod.position.y - flat).abs() < 1e-3,
         "not lying flat: centre at y {}",
         rod.position.y
     );
@@ -109,14 +122,22 @@ fn a_frictionless_rod_falling_from_nearly_upright_keeps_its_centre_on_the_vertic
 
 #[test]
 fn a_heavy_rolling_ball_strikes_a_light_one_elastically_and_both_end_rolling() {
-    // A ball 8 times as heavy rolls at 2 m/s into a resting ball of the same size
-    // (restitution 1, no friction between the balls): they leave at 7/9·2 and 16/9·2 m/s,
-    // then the ground's friction brings each to rolling at (5·v + 2·(surface speed))/7:
-    // the heavy one at (5·14/9 + 2·2)/7 = 1.6825 m/s, the light one at 5·32/9/7 = 2.5397.
-    let states = run(scene("heavy_light"), 240);
+    // A ball M/m = 8 times as heavy rolls at v into a resting ball of the same size
+    // (restitution 1, no friction between the balls): they leave at (M − m)/(M + m)·v and
+    // 2M/(M + m)·v, keeping their spins; then the ground's friction brings each to rolling
+    // at (5·u + 2·(surface speed))/7, which keeps its angular momentum about its contact
+    // point: here the heavy one at 1.6825 m/s and the light one at 2.5397.
+    let s = scene("heavy_light");
+    let (striker, struck) = (&s.bodies[0], &s.bodies[1]);
+    let r = radius(striker.shape);
+    assert_eq!(r, radius(struck.shape), "the formula is for equal balls");
+    let ratio = (striker.material.density / struck.material.density) as f64;
+    let v = striker.velocity[0] as f64;
+    let surface = -(striker.angular_velocity[2] as f64) * r;
+    let heavy = (5.0 * (ratio - 1.0) / (ratio + 1.0) * v + 2.0 * surface) / 7.0;
+    let light = 5.0 * 2.0 * ratio / (ratio + 1.0) * v / 7.0;
+    let states = run(s, 240);
     let last = states.last().unwrap();
-    let heavy = (5.0 * 14.0 / 9.0 + 4.0) / 7.0;
-    let light = 5.0 * 32.0 / 9.0 / 7.0;
     for (body, expected) in [(&last[0], heavy), (&last[1], light)] {
         let speed = body.linvel.x as f64;
         assert!(
@@ -124,7 +145,7 @@ fn a_heavy_rolling_ball_strikes_a_light_one_elastically_and_both_end_rolling() {
             "ball {} rolls at {speed} m/s, expected {expected}",
             body.id()
         );
-        let surface = -(body.angvel.z as f64) * 0.2;
+        let surface = -(body.angvel.z as f64) * r;
         assert!(
             (speed - surface).abs() < 1e-3,
             "ball {} is not rolling: {speed} m/s against a surface speed of {surface}",
