@@ -63,6 +63,11 @@ pub enum SetRole {
     /// moves after the pair's response (`j` immovable, inverse mass 0), with no position
     /// correction (the pair corrects the overlap), friction or bounce (both the pair's).
     Paired,
+    /// A support in a load system (SPEC.md §5.2, "Load"): treated as [`SetRole::Whole`]
+    /// (immovable, with position correction, friction and bounce), but its points move as
+    /// the joint solve of the load moves the support, and `i` follows them through the whole
+    /// step, not only its first substep.
+    Loaded,
 }
 
 impl SetRole {

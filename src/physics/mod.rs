@@ -10,6 +10,7 @@ mod free_rotation;
 mod friction;
 mod initial_depth;
 mod lcp;
+mod load;
 pub mod metrics;
 mod model;
 mod pair;

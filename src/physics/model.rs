@@ -7,6 +7,7 @@ use super::contact::{
 };
 use super::environment::{DomainBox, Environment};
 use super::event::EventKind;
+use super::load;
 use super::pair::{Edge, PairContact, PairEffect};
 use super::params::SolverParams;
 use super::rotation::integrate_rotation;
@@ -64,7 +65,10 @@ struct Contacts<'a> {
     /// Awake bodies resting on this one, with their manifolds, ascending id: each becomes a
     /// carried set if the body approaches it at the start or at the end of its solve
     /// (SPEC.md §5.2).
-    carried: Vec<(&'a Body, PairManifold)>,
+    carried: Vec<(&'a Body, PairManifold, [i32; 3])>,
+    /// Awake bodies this one rests on (supports), with their cells, ascending id: each may
+    /// form a load system with it (SPEC.md §5.2, "Load").
+    supports: Vec<(&'a Body, [i32; 3])>,
     /// Symmetric pair contacts, ascending partner id.
     pairs: Vec<PairEntry<'a>>,
     /// Whether every body partner with contact points was quiet at step `t` (SPEC.md §5.4).
@@ -82,6 +86,10 @@ struct Contacts<'a> {
 
 /// Manifolds of the pairs computed for one cell, keyed by (lower id, higher id).
 type ManifoldCache = Vec<(BodyId, BodyId, Option<PairManifold>)>;
+
+/// Load systems solved for one cell whose two bodies are both in it, keyed by (upper id,
+/// lower id); `None` where the pair forms none.
+type SolvedLoads = Vec<((BodyId, BodyId), Option<std::rc::Rc<Vec<load::UpperLoad>>>)>;
 
 impl RigidBodyModel {
     /// Largest displacement of a body's centre in one step (the speed cap times `dt`).
@@ -119,6 +127,7 @@ impl RigidBodyModel {
         let mut sets = Vec::new();
         let mut pairs = Vec::new();
         let mut carried = Vec::new();
+        let mut supports = Vec::new();
         for c in candidates {
             if c.body.id() == own.body.id() || !own.may_touch(c, slack) {
                 continue;
@@ -154,12 +163,15 @@ impl RigidBodyModel {
                     if self.is_asleep(j) {
                         sets.push(pile_contact(own.body, j, &m));
                     } else {
-                        carried.push((j, m));
+                        carried.push((j, m, c.offset));
                     }
                 }
                 Some(_) => {
                     support_depth = support_depth.min(u32::from(j.support_depth) + 1);
                     sets.push(support_contact(own.body, j, &m));
+                    if !self.is_asleep(j) && !self.is_asleep(own.body) {
+                        supports.push((j, c.offset));
+                    }
                 }
                 None => {
                     let contact = self.pair_contact(a, b, &m);
@@ -184,7 +196,8 @@ impl RigidBodyModel {
         }
         sets.sort_unstable_by_key(|s| s.partner);
         pairs.sort_unstable_by_key(|p| p.partner.id());
-        carried.sort_unstable_by_key(|c: &(&Body, PairManifold)| c.0.id());
+        carried.sort_unstable_by_key(|c| c.0.id());
+        supports.sort_unstable_by_key(|c| c.0.id());
         let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
         let radius = own.body.bounding_radius();
         if let Some(env) = environment_contacts(
@@ -214,6 +227,7 @@ impl RigidBodyModel {
             sets,
             pairs,
             carried,
+            supports,
             partners_quiet,
             touching,
             disturbed,
@@ -457,6 +471,174 @@ impl RigidBodyModel {
             }
         }
         (mine, theirs, beaten)
+    }
+
+    /// Whether `x` and `y` touch at step `t` (a manifold within their speculative distance,
+    /// the test of [`Self::contacts`]); the manifold in canonical order if so.
+    fn touching(&self, x: &Body, y: &Body, cache: &mut ManifoldCache) -> Option<PairManifold> {
+        // No pair's speculative distance exceeds the cap: bodies farther apart never touch.
+        if !near(x, y, self.prediction()) {
+            return None;
+        }
+        let (a, b) = canonical(x, y);
+        let reach = speculative_distance(
+            a,
+            Some(b),
+            self.dt,
+            self.gravity.norm(),
+            self.params.margin,
+            self.prediction(),
+        );
+        if !near(a, b, reach) {
+            return None;
+        }
+        self.manifold(a, b, reach, cache)
+    }
+
+    /// The environment contacts of `body` at step `t`, as its own solve finds them.
+    fn environment_set(&self, body: &Body) -> Option<ContactSet> {
+        let cap = self.prediction();
+        let reach = speculative_distance(
+            body,
+            None,
+            self.dt,
+            self.gravity.norm(),
+            self.params.margin,
+            cap,
+        );
+        let radius = body.bounding_radius();
+        environment_contacts(
+            body,
+            &self.environment,
+            reach,
+            keep_distance(reach, radius, radius, cap),
+        )
+    }
+
+    /// The solved load system of `upper` resting on `lower` ([`Self::load_system`],
+    /// [`load::solve_load`]), computed once per cell for a pair whose two bodies are both in
+    /// the centre cell (both offsets 0: the same system from either side).
+    #[allow(clippy::too_many_arguments)]
+    fn solved_load<'a>(
+        &self,
+        upper: &'a Body,
+        upper_offset: [i32; 3],
+        lower: &'a Body,
+        lower_offset: [i32; 3],
+        nb: &Neighbourhood<'a, Body>,
+        cache: &mut ManifoldCache,
+        solved: &mut SolvedLoads,
+    ) -> Option<std::rc::Rc<Vec<load::UpperLoad>>> {
+        let own_pair = upper_offset == [0; 3] && lower_offset == [0; 3];
+        let key = (upper.id(), lower.id());
+        if own_pair {
+            if let Ok(at) = solved.binary_search_by_key(&key, |e| e.0) {
+                return solved[at].1.clone();
+            }
+        }
+        let loads = self
+            .load_system(upper, upper_offset, lower, lower_offset, nb, cache)
+            .map(|system| std::rc::Rc::new(load::solve_load(&system, self.gravity, self.dt)));
+        if own_pair {
+            let at = solved.partition_point(|e| e.0 < key);
+            solved.insert(at, (key, loads.clone()));
+        }
+        loads
+    }
+
+    /// The load system (SPEC.md §5.2, "Load") of `upper` resting on `lower` (both awake, the
+    /// contact a support), read from the cells both bodies' cells contain (`upper_offset`,
+    /// `lower_offset`: their cells relative to the centre cell), so that both cells build
+    /// the same one: `lower`, the bodies it rests on and the environment as what holds it,
+    /// and every awake body resting on it (`upper` among them). `None` — shock propagation
+    /// alone — if `lower` touches any other body there, if an upper body touches a body other
+    /// than `lower` there, or if nothing found there holds `lower` up.
+    fn load_system<'a>(
+        &self,
+        upper: &'a Body,
+        upper_offset: [i32; 3],
+        lower: &'a Body,
+        lower_offset: [i32; 3],
+        nb: &Neighbourhood<'a, Body>,
+        cache: &mut ManifoldCache,
+    ) -> Option<load::LoadSystem<'a>> {
+        let up = self.up()?;
+        // Only a lower body that rests on the static environment itself: there the load's
+        // path ends within the system. (Deeper in a chain, every body of a column would build
+        // and solve one, 3 times the cost of a 1,000-cube pile, measured 2026-11-29.)
+        if lower.support_depth != 1 {
+            return None;
+        }
+        let shared = |o: [i32; 3]| {
+            (0..3)
+                .all(|k| (o[k] - upper_offset[k]).abs() <= 1 && (o[k] - lower_offset[k]).abs() <= 1)
+        };
+        let region = || {
+            nb.cells
+                .iter()
+                .enumerate()
+                .filter(move |(slot, _)| shared(Neighbourhood::<Body>::offset(*slot)))
+                .flat_map(|(_, cell)| cell.iter())
+                .filter(|k| !k.is_leaving())
+        };
+        let mut holds: Vec<ContactSet> = Vec::new();
+        let mut uppers: Vec<(&'a Body, PairManifold)> = Vec::new();
+        let mut held_up = false;
+        for k in region() {
+            if k.id() == lower.id() {
+                continue;
+            }
+            let Some(m) = self.touching(lower, k, cache) else {
+                continue;
+            };
+            let (a, b) = canonical(lower, k);
+            match self.support(a, b, &m) {
+                Some(id) if id == k.id() => {
+                    held_up = true;
+                    holds.push(support_contact(lower, k, &m));
+                }
+                Some(_) if !self.is_asleep(k) => uppers.push((k, m)),
+                _ => return None,
+            }
+        }
+        if !uppers.iter().any(|(k, _)| k.id() == upper.id()) {
+            return None;
+        }
+        // Every upper body touches no other body there (checked before anything is built).
+        for (k, _) in &uppers {
+            for j in region() {
+                if j.id() != k.id() && j.id() != lower.id() && self.touching(k, j, cache).is_some()
+                {
+                    return None;
+                }
+            }
+        }
+        // Ascending id (the region is read slot by slot), the environment last.
+        holds.sort_unstable_by_key(|set| set.partner);
+        uppers.sort_unstable_by_key(|(k, _)| k.id());
+        if let Some(env) = self.environment_set(lower) {
+            held_up |= env
+                .points
+                .iter()
+                .any(|p| p.normal.dot(&up) > SUPPORT_COSINE);
+            holds.push(env);
+        }
+        if !held_up {
+            return None;
+        }
+        let system = load::LoadSystem {
+            lower,
+            holds,
+            uppers: uppers
+                .into_iter()
+                .map(|(k, manifold)| load::Upper {
+                    body: k,
+                    manifold,
+                    environment: self.environment_set(k),
+                })
+                .collect(),
+        };
+        Some(system)
     }
 
     /// Slack added to the broad-phase filters so that they stay supersets of the exact
@@ -743,6 +925,7 @@ impl CellModel for RigidBodyModel {
         }
         let mut candidates: Vec<Candidate<'_>> = Vec::new();
         let mut cache = Vec::new();
+        let mut solved = SolvedLoads::new();
         let mut rows = SolveRows::default();
         for own in nb.own() {
             // Removed by an input at this step (SPEC.md §5.4): not in the next state.
@@ -830,6 +1013,43 @@ impl CellModel for RigidBodyModel {
             }
             let me = Candidate::new(own, [0; 3], self.dt, self.prediction());
             let mut found = self.contacts(&me, &candidates, &mut cache);
+            // Load systems (SPEC.md §5.2, "Load"): as an upper body, `own` sees each support
+            // that forms one with it move as the joint solve moves it; as a lower body, it
+            // takes each upper body's impulses, spread over its solve as a force.
+            for (lower, offset) in &found.supports {
+                let Some(loads) =
+                    self.solved_load(own, [0; 3], lower, *offset, nb, &mut cache, &mut solved)
+                else {
+                    continue;
+                };
+                let Some(mine) = loads.iter().find(|l| l.id == own.id()) else {
+                    continue;
+                };
+                if let Some(set) = found
+                    .sets
+                    .iter_mut()
+                    .find(|s| s.partner == Some(lower.id()))
+                {
+                    set.role = SetRole::Loaded;
+                    for (p, v) in set.points.iter_mut().zip(&mine.point_velocities) {
+                        p.partner_velocity = *v;
+                    }
+                }
+            }
+            let mut load = load::LoadEffect::default();
+            if !self.is_asleep(own) {
+                for (upper, _, offset) in &found.carried {
+                    let Some(loads) =
+                        self.solved_load(upper, *offset, own, [0; 3], nb, &mut cache, &mut solved)
+                    else {
+                        continue;
+                    };
+                    if let Some(theirs) = loads.iter().find(|l| l.id == upper.id()) {
+                        load.dv += theirs.lower_dv;
+                        load.dw += theirs.lower_dw;
+                    }
+                }
+            }
             // Symmetric pairs first (SPEC.md §5.3), each with its bodies' mass-splitting
             // counts, summed in ascending partner id.
             let mut effect = PairEffect::default();
@@ -883,7 +1103,7 @@ impl CellModel for RigidBodyModel {
             let carried = found
                 .carried
                 .iter()
-                .map(|(j, m)| carried_contact(&start, j, m));
+                .map(|(j, m, _)| carried_contact(&start, j, m));
             for set in carried.chain(paired) {
                 if approaches(&start, &set) {
                     insert_by_partner(&mut found.sets, set);
@@ -895,6 +1115,7 @@ impl CellModel for RigidBodyModel {
                 solve_body(
                     &start,
                     &effect,
+                    &load,
                     sets,
                     self.gravity,
                     self.dt,
@@ -975,18 +1196,20 @@ impl CellModel for RigidBodyModel {
         }
     }
 
-    /// A body's step reads a neighbour through `can_reach` (contacts and waking), and, for
-    /// the matching of its symmetric pairs, the partners of its partners: any body within
-    /// two contacts (`r_i + r_k + 2·(r_max + prediction)` between centres). An all-asleep
+    /// A body's step reads a neighbour through `can_reach` (contacts and waking), for the
+    /// matching of its symmetric pairs the partners of its partners, and for a load system
+    /// (SPEC.md §5.2) the partners of the other bodies resting on its support: any body within
+    /// three contacts (`r_i + r_k + 4·r_max + 3·prediction` between centres). An all-asleep
     /// neighbourhood freezes exactly the bodies no awake body reaches.
     fn may_affect(&self, reader: &Body, other: &Body) -> bool {
         if self.can_reach(reader, other) {
             return true;
         }
-        let two = reader.bounding_radius()
+        let three = reader.bounding_radius()
             + other.bounding_radius()
-            + 2.0 * (self.max_radius + self.prediction());
-        (reader.position - other.position).norm_squared() <= two * two
+            + 4.0 * self.max_radius
+            + 3.0 * self.prediction();
+        (reader.position - other.position).norm_squared() <= three * three
     }
     /// Asleep, with both velocities exactly `+0.0`: an all-asleep neighbourhood gives every
     /// body of the centre cell its frozen copy (same pose and counter, zero velocities,

@@ -15,6 +15,7 @@ use super::contact::{ContactPoint, ContactSet, SetRole};
 use super::frame::Frame;
 use super::friction::{coulomb, Tangent, Traction};
 use super::lcp;
+use super::load::LoadEffect;
 use super::pair::PairEffect;
 use super::params::SolverParams;
 use super::rotation::integrate_rotation;
@@ -201,7 +202,7 @@ fn torsional_impulse(f: &Frame, w: &Vec3, n: &Vec3, cap: f32) -> Vec3 {
 fn mobility(sets: &[ContactSet], n: &Vec3) -> f32 {
     let mut f = 1.0f32;
     for set in sets {
-        if set.role != SetRole::Whole {
+        if !matches!(set.role, SetRole::Whole | SetRole::Loaded) {
             continue;
         }
         let most = set
@@ -269,7 +270,7 @@ fn passing_pile_sets(
 fn partner_at(role: SetRole, cp: &ContactPoint, h: f32, through: u32) -> Vec3 {
     match role {
         SetRole::Whole => cp.partner_point + cp.partner_velocity * h,
-        SetRole::Pile | SetRole::Carried | SetRole::Paired => {
+        SetRole::Pile | SetRole::Carried | SetRole::Paired | SetRole::Loaded => {
             cp.partner_point + cp.partner_velocity * (h * through as f32)
         }
     }
@@ -289,7 +290,7 @@ fn partner_at(role: SetRole, cp: &ContactPoint, h: f32, through: u32) -> Vec3 {
 fn closing_allowance(role: SetRole, cp: &ContactPoint, gap0: f32, h: f32) -> (f32, f32) {
     match role {
         SetRole::Whole => (0.0, gap0.max(0.0) / h),
-        SetRole::Pile | SetRole::Carried | SetRole::Paired => {
+        SetRole::Pile | SetRole::Carried | SetRole::Paired | SetRole::Loaded => {
             let towards = cp.normal.dot(&cp.partner_velocity);
             let gap_start = gap0 + towards * h;
             (towards, gap_start.max(0.0) / h)
@@ -497,11 +498,14 @@ impl SolveRows {
 /// Advances `body` by one step of `dt` seconds against the contact sets (ascending partner
 /// id, static environment last). `body` carries its symmetric pairs' velocity changes,
 /// `pairs` (SPEC.md §5.3); a pile contact lets their approach towards its partner pass (the
-/// partner taken to move away as fast, [`passing_pile_sets`]). Returns the
-/// new state (velocities and pose).
+/// partner taken to move away as fast, [`passing_pile_sets`]). `load`: the velocity change
+/// (linear, angular) the bodies resting on it give it over the step (SPEC.md §5.2, "Load"),
+/// spread over the substeps like a force. Returns the new state (velocities and pose).
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn solve_body(
     body: &Body,
     pairs: &PairEffect,
+    load: &LoadEffect,
     sets: &[ContactSet],
     gravity: Vec3,
     dt: f32,
@@ -510,11 +514,19 @@ pub(crate) fn solve_body(
 ) -> Body {
     let n_sub = p.substeps.max(1);
     let h = dt / n_sub as f32;
+    // The load of the bodies resting on this one (SPEC.md §5.2, "Load"): their impulses over
+    // the step, spread over the substeps like a force.
+    let share = 1.0 / n_sub as f32;
+    let loaded = !load.is_none();
     let mut b = body.clone();
     if sets.is_empty() {
         // Free flight: no contact can act within the step.
         for _ in 0..n_sub {
             b.linvel += gravity * h;
+            if loaded {
+                b.linvel += load.dv * share;
+                b.angvel += load.dw * share;
+            }
             b.position += b.linvel * h;
             let turned = b.free_rotation(h);
             b.rotation = turned.rotation;
@@ -574,6 +586,10 @@ pub(crate) fn solve_body(
             }
         }
         b.linvel += gravity * h;
+        if loaded {
+            b.linvel += load.dv * share;
+            b.angvel += load.dw * share;
+        }
 
         // Impact pass: sequential impulses so that no point closes more than its current
         // gap within the substep (plastic: an approach is stopped, never reflected here).

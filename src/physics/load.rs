@@ -1,0 +1,304 @@
+//! The load a body puts on the body it rests on (SPEC.md §5.2, "Load").
+//!
+//! Shock propagation lets an upper body treat the body it rests on as immovable, so the
+//! lower body never feels the weight it carries: a lever did not tip, a ball balanced on a
+//! ball on frictionless ground rolled off a lower ball that never moved, and a box thrown
+//! under another felt neither its weight nor its friction. Where the two bodies form a small
+//! system of their own — the lower body touches no other body but those it rests on and
+//! bodies resting on it alone, and those upper bodies touch no other body — the system is
+//! solved together for one step, as a pure function of the step-`t` states that both cells
+//! compute alike: each upper body then sees the lower body move as the load moves it, and
+//! the lower body receives the impulse each upper body puts on it, as a force spread over its
+//! own solve's substeps.
+
+use super::body::Body;
+use super::contact::{ContactSet, PairManifold};
+use crate::math::Vec3;
+use smallvec::SmallVec;
+
+/// Sweeps of the joint solve at most (it stops earlier once converged).
+const LOAD_SWEEPS: u32 = 24;
+
+/// The sweeps stop once no row's velocity changed by more than this, m/s.
+const LOAD_TOLERANCE: f32 = 1e-6;
+
+/// Slip speeds at or below this are left alone (no direction can be taken from them), m/s.
+const SLIP_EPSILON: f32 = 1e-9;
+
+/// One upper body of a load system: a body resting on the lower one and on nothing else
+/// but the static environment.
+pub(crate) struct Upper<'a> {
+    /// The body.
+    pub body: &'a Body,
+    /// Its manifold with the lower body (canonical order, lower id first).
+    pub manifold: PairManifold,
+    /// Its contacts with the static environment, if any.
+    pub environment: Option<ContactSet>,
+}
+
+/// A load system: the lower body, what holds it (the static environment and the bodies it
+/// rests on, as it sees them in its own solve: immovable), and the bodies resting on it
+/// alone, ascending id.
+pub(crate) struct LoadSystem<'a> {
+    /// The lower body.
+    pub lower: &'a Body,
+    /// The lower body's sets against what holds it: its supports' views and the
+    /// environment's, partner velocities as its own solve sees them.
+    pub holds: Vec<ContactSet>,
+    /// The upper bodies, ascending id.
+    pub uppers: Vec<Upper<'a>>,
+}
+
+/// What one upper body takes from the joint solve, and gives.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct UpperLoad {
+    /// The upper body's id.
+    pub id: crate::model::BodyId,
+    /// The lower body's velocity change from this upper body's impulses over the step
+    /// (linear, angular), to be spread over its solve.
+    pub lower_dv: Vec3,
+    /// See `lower_dv`.
+    pub lower_dw: Vec3,
+    /// What the upper body sees its support move at, at each point of its manifold (in
+    /// manifold order): the lower body's linear velocity at the end of the joint solve, with
+    /// its normal part that of the lower body's point there, spin included. (The spin's
+    /// tangential part is left out, as in every view: `docs/open-defects/` §13.)
+    pub point_velocities: SmallVec<[Vec3; 4]>,
+}
+
+/// What the bodies resting on a lower body give it over one step (SPEC.md §5.2, "Load"): a
+/// velocity change its solve spreads over its substeps, like a force.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct LoadEffect {
+    /// Change of linear velocity over the step, m/s.
+    pub dv: Vec3,
+    /// Change of angular velocity over the step, rad/s.
+    pub dw: Vec3,
+}
+
+impl LoadEffect {
+    /// Whether there is no load at all.
+    pub fn is_none(&self) -> bool {
+        self.dv == Vec3::zeros() && self.dw == Vec3::zeros()
+    }
+}
+
+/// A row of the joint solve: one contact point between body `a` and either body `b` or
+/// something immovable moving at `partner_velocity`.
+struct Row {
+    /// Index of the body pushed along `normal`.
+    a: usize,
+    /// Index of the other body, if movable.
+    b: Option<usize>,
+    /// Offsets of the point from the two centres.
+    ra: Vec3,
+    rb: Vec3,
+    /// Unit normal from `b` (or the immovable partner) towards `a`.
+    normal: Vec3,
+    /// The immovable partner's velocity (unused with `b`).
+    partner_velocity: Vec3,
+    /// Gap along the normal at `t` (negative: overlap), m.
+    gap: f32,
+    /// Friction coefficient.
+    friction: f32,
+    /// Accumulated normal impulse, N·s.
+    normal_impulse: f32,
+    /// Accumulated friction impulse, N·s.
+    friction_impulse: Vec3,
+}
+
+/// A body's velocities and its response in the joint solve.
+struct Motion {
+    linvel: Vec3,
+    angvel: Vec3,
+    inv_mass: f32,
+    inv_inertia: nalgebra::Matrix3<f32>,
+}
+
+impl Motion {
+    fn of(b: &Body) -> Motion {
+        Motion {
+            linvel: b.linvel,
+            angvel: b.angvel,
+            inv_mass: b.inv_mass(),
+            inv_inertia: b.world_inv_inertia(&b.rotation),
+        }
+    }
+
+    fn point_velocity(&self, r: &Vec3) -> Vec3 {
+        self.linvel + self.angvel.cross(r)
+    }
+
+    fn inv_mass_along(&self, r: &Vec3, d: &Vec3) -> f32 {
+        let rd = r.cross(d);
+        self.inv_mass + rd.dot(&(self.inv_inertia * rd))
+    }
+
+    fn apply(&mut self, r: &Vec3, impulse: &Vec3) {
+        self.linvel += impulse * self.inv_mass;
+        self.angvel += self.inv_inertia * r.cross(impulse);
+    }
+}
+
+fn relative_velocity(row: &Row, bodies: &[Motion]) -> Vec3 {
+    let va = bodies[row.a].point_velocity(&row.ra);
+    let vb = match row.b {
+        Some(b) => bodies[b].point_velocity(&row.rb),
+        None => row.partner_velocity,
+    };
+    va - vb
+}
+
+fn inv_mass_along(row: &Row, bodies: &[Motion], d: &Vec3) -> f32 {
+    bodies[row.a].inv_mass_along(&row.ra, d)
+        + row.b.map_or(0.0, |b| bodies[b].inv_mass_along(&row.rb, d))
+}
+
+fn push(row: &Row, bodies: &mut [Motion], impulse: &Vec3) {
+    bodies[row.a].apply(&row.ra, impulse);
+    if let Some(b) = row.b {
+        bodies[b].apply(&row.rb, &-impulse);
+    }
+}
+
+/// Rows of body `index` against an immovable set (its holds, or the environment).
+fn immovable_rows(rows: &mut Vec<Row>, index: usize, body: &Body, set: &ContactSet) {
+    for cp in &set.points {
+        let ra = body.rotation * cp.anchor;
+        rows.push(Row {
+            a: index,
+            b: None,
+            ra,
+            rb: Vec3::zeros(),
+            normal: cp.normal,
+            partner_velocity: cp.partner_velocity,
+            gap: cp.normal.dot(&(body.position + ra - cp.partner_point)),
+            friction: set.friction,
+            normal_impulse: 0.0,
+            friction_impulse: Vec3::zeros(),
+        });
+    }
+}
+
+/// Solves the load system for one step of `dt` under `gravity` (velocities only: every row
+/// may close by its gap within the step and must not approach beyond it; Coulomb friction
+/// within `μ` times the row's normal impulse) and returns what each upper body gives and
+/// takes, ascending id.
+pub(crate) fn solve_load(system: &LoadSystem<'_>, gravity: Vec3, dt: f32) -> Vec<UpperLoad> {
+    let lower = system.lower;
+    let mut bodies: Vec<Motion> = std::iter::once(Motion::of(lower))
+        .chain(system.uppers.iter().map(|u| Motion::of(u.body)))
+        .collect();
+    for m in &mut bodies {
+        m.linvel += gravity * dt;
+    }
+    let mut rows: Vec<Row> = Vec::new();
+    for set in &system.holds {
+        immovable_rows(&mut rows, 0, lower, set);
+    }
+    // Where each upper body's rows with the lower body start.
+    let mut starts = Vec::with_capacity(system.uppers.len());
+    for (u, upper) in system.uppers.iter().enumerate() {
+        let index = u + 1;
+        if let Some(env) = &upper.environment {
+            immovable_rows(&mut rows, index, upper.body, env);
+        }
+        starts.push(rows.len());
+        let upper_is_a = upper.body.id() < lower.id();
+        let normal = if upper_is_a {
+            -upper.manifold.normal_ab
+        } else {
+            upper.manifold.normal_ab
+        };
+        let friction = 0.5 * (upper.body.friction() + lower.friction());
+        for &(la, lb) in &upper.manifold.local {
+            let (lu, ll) = if upper_is_a { (la, lb) } else { (lb, la) };
+            let ra = upper.body.rotation * lu;
+            let rb = lower.rotation * ll;
+            rows.push(Row {
+                a: index,
+                b: Some(0),
+                ra,
+                rb,
+                normal,
+                partner_velocity: Vec3::zeros(),
+                gap: normal.dot(&(upper.body.position + ra - lower.position - rb)),
+                friction,
+                normal_impulse: 0.0,
+                friction_impulse: Vec3::zeros(),
+            });
+        }
+    }
+    for _ in 0..LOAD_SWEEPS {
+        let mut largest_change = 0.0f32;
+        for row in &mut rows {
+            let n = row.normal;
+            let vn = n.dot(&relative_velocity(row, &bodies));
+            let target = -row.gap.max(0.0) / dt;
+            let w = inv_mass_along(row, &bodies, &n);
+            let next = (row.normal_impulse + (target - vn) / w).max(0.0);
+            if next != row.normal_impulse {
+                let d = next - row.normal_impulse;
+                push(row, &mut bodies, &(n * d));
+                row.normal_impulse = next;
+                largest_change = largest_change.max(d.abs() * w);
+            }
+            if row.friction <= 0.0 {
+                continue;
+            }
+            let v = relative_velocity(row, &bodies);
+            let slip = v - n * n.dot(&v);
+            let speed = slip.norm();
+            let bound = row.friction * row.normal_impulse;
+            let wanted = if speed > SLIP_EPSILON {
+                let t = slip / speed;
+                row.friction_impulse - t * (speed / inv_mass_along(row, &bodies, &t))
+            } else {
+                row.friction_impulse
+            };
+            let wanted_len = wanted.norm();
+            let next = if wanted_len > bound && wanted_len > 0.0 {
+                wanted * (bound / wanted_len)
+            } else {
+                wanted
+            };
+            let d = next - row.friction_impulse;
+            if d != Vec3::zeros() {
+                push(row, &mut bodies, &d);
+                row.friction_impulse = next;
+                let dn = d.norm();
+                largest_change = largest_change.max(dn * inv_mass_along(row, &bodies, &(d / dn)));
+            }
+        }
+        if largest_change < LOAD_TOLERANCE {
+            break;
+        }
+    }
+    let l = &bodies[0];
+    let lower_inv_inertia = l.inv_inertia;
+    system
+        .uppers
+        .iter()
+        .enumerate()
+        .map(|(u, upper)| {
+            let range = starts[u]..starts[u] + upper.manifold.local.len();
+            let (mut dv, mut torque) = (Vec3::zeros(), Vec3::zeros());
+            let mut point_velocities = SmallVec::new();
+            for row in &rows[range] {
+                // The impulse on the lower body: the row's, negated.
+                let on_lower = -(row.normal * row.normal_impulse + row.friction_impulse);
+                dv += on_lower;
+                torque += row.rb.cross(&on_lower);
+                let n = row.normal;
+                let along = n.dot(&l.point_velocity(&row.rb));
+                point_velocities.push(l.linvel + n * (along - n.dot(&l.linvel)));
+            }
+            UpperLoad {
+                id: upper.body.id(),
+                lower_dv: dv * l.inv_mass,
+                lower_dw: lower_inv_inertia * torque,
+                point_velocities,
+            }
+        })
+        .collect()
+}
