@@ -118,6 +118,7 @@ impl Tangent {
 /// accumulated impulse beyond a smaller cap is shortened; a change shortened onto the cone
 /// never adds energy). The change is applied to `b`'s velocities. Returns how much the
 /// point's slip velocity changed (`|K·Δ|`), m/s.
+#[inline]
 pub(super) fn coulomb(
     row: &Tangent,
     b: &mut Body,

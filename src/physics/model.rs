@@ -69,6 +69,9 @@ struct Contacts<'a> {
     /// Awake bodies this one rests on (supports), with their cells, ascending id: each may
     /// form a load system with it (SPEC.md §5.2, "Load").
     supports: Vec<(&'a Body, [i32; 3])>,
+    /// Every body it touches, in the order met: what rejects a load system before its
+    /// cells are read.
+    touches: Vec<Touch>,
     /// Symmetric pair contacts, ascending partner id.
     pairs: Vec<PairEntry<'a>>,
     /// Whether every body partner with contact points was quiet at step `t` (SPEC.md §5.4).
@@ -82,6 +85,22 @@ struct Contacts<'a> {
     disturbed: bool,
     /// The body's support depth after this step (SPEC.md §5.2).
     support_depth: u32,
+}
+
+/// A body that one body touches at step `t` (SPEC.md §5.2, "Load").
+struct Touch {
+    /// The body.
+    id: BodyId,
+    /// Its cell relative to the centre cell.
+    offset: [i32; 3],
+    /// Whether, seen from the body touching it as the lower body of a load system, it may be
+    /// part of one: a body it rests on, or an awake body resting on it.
+    in_load: bool,
+}
+
+/// Whether cell `o` (relative to the centre cell) is within one cell of both `a` and `b`.
+fn shared_by(o: [i32; 3], a: [i32; 3], b: [i32; 3]) -> bool {
+    (0..3).all(|k| (o[k] - a[k]).abs() <= 1 && (o[k] - b[k]).abs() <= 1)
 }
 
 /// Manifolds of the pairs computed for one cell, keyed by (lower id, higher id).
@@ -128,6 +147,7 @@ impl RigidBodyModel {
         let mut pairs = Vec::new();
         let mut carried = Vec::new();
         let mut supports = Vec::new();
+        let mut touches = Vec::new();
         for c in candidates {
             if c.body.id() == own.body.id() || !own.may_touch(c, slack) {
                 continue;
@@ -154,7 +174,17 @@ impl RigidBodyModel {
             };
             partners_quiet &= j.is_quiet(self.params.sleep_speed);
             touching = true;
-            match self.support(a, b, &m) {
+            let support = self.support(a, b, &m);
+            touches.push(Touch {
+                id: j.id(),
+                offset: c.offset,
+                in_load: match support {
+                    Some(lower) if lower == own.body.id() => !self.is_asleep(j),
+                    Some(_) => true,
+                    None => false,
+                },
+            });
+            match support {
                 // Shock propagation: `own` does not carry the weight of a partner resting on
                 // it, but stops its own approach to it (a carried set); a sleeping partner is a
                 // pile contact (a frozen body does not move out of the way, so a woken lower
@@ -228,6 +258,7 @@ impl RigidBodyModel {
             pairs,
             carried,
             supports,
+            touches,
             partners_quiet,
             touching,
             disturbed,
@@ -489,7 +520,10 @@ impl RigidBodyModel {
             self.params.margin,
             self.prediction(),
         );
-        if !near(a, b, reach) {
+        // The world boxes grown by the reach, as in `Self::contacts` (a superset of the
+        // manifold's test, with the same slack against rounding): most bodies beside a cube
+        // within its bounding sphere's reach are dropped here, before parry.
+        if !near(a, b, reach) || !world_boxes_within(a, b, reach + self.filter_slack()) {
             return None;
         }
         self.manifold(a, b, reach, cache)
@@ -569,10 +603,7 @@ impl RigidBodyModel {
         if lower.support_depth != 1 {
             return None;
         }
-        let shared = |o: [i32; 3]| {
-            (0..3)
-                .all(|k| (o[k] - upper_offset[k]).abs() <= 1 && (o[k] - lower_offset[k]).abs() <= 1)
-        };
+        let shared = |o: [i32; 3]| shared_by(o, upper_offset, lower_offset);
         let region = || {
             nb.cells
                 .iter()
@@ -581,6 +612,16 @@ impl RigidBodyModel {
                 .flat_map(|(_, cell)| cell.iter())
                 .filter(|k| !k.is_leaving())
         };
+        // The upper body touches no other body there: checked first, as it rejects most (in
+        // a column it carries the body above it).
+        let alone = |k: &Body, cache: &mut ManifoldCache| {
+            region().all(|j| {
+                j.id() == k.id() || j.id() == lower.id() || self.touching(k, j, cache).is_none()
+            })
+        };
+        if !alone(upper, cache) {
+            return None;
+        }
         let mut holds: Vec<ContactSet> = Vec::new();
         let mut uppers: Vec<(&'a Body, PairManifold)> = Vec::new();
         let mut held_up = false;
@@ -604,13 +645,10 @@ impl RigidBodyModel {
         if !uppers.iter().any(|(k, _)| k.id() == upper.id()) {
             return None;
         }
-        // Every upper body touches no other body there (checked before anything is built).
+        // Every other upper body touches no other body there either.
         for (k, _) in &uppers {
-            for j in region() {
-                if j.id() != k.id() && j.id() != lower.id() && self.touching(k, j, cache).is_some()
-                {
-                    return None;
-                }
+            if k.id() != upper.id() && !alone(k, cache) {
+                return None;
             }
         }
         // Ascending id (the region is read slot by slot), the environment last.
@@ -755,6 +793,23 @@ impl<'a> Candidate<'a> {
         let limit = self.half_box() + other.half_box();
         (0..3).all(|k| d[k] <= limit[k] + distance)
     }
+}
+
+/// Half extents of `b`'s world-aligned bounding box.
+fn world_half_box(b: &Body) -> Vec3 {
+    match b.shape() {
+        Shape::Ball { radius } => Vec3::repeat(radius),
+        Shape::Cuboid { half_extents } => {
+            b.rotation.to_rotation_matrix().into_inner().abs() * Vec3::from(half_extents)
+        }
+    }
+}
+
+/// Whether the world boxes of `a` and `b` lie within `distance` of each other on every axis.
+fn world_boxes_within(a: &Body, b: &Body, distance: f32) -> bool {
+    let d = (a.position - b.position).abs();
+    let limit = world_half_box(a) + world_half_box(b);
+    (0..3).all(|k| d[k] <= limit[k] + distance)
 }
 
 /// Inserts `set` into `sets` (ascending partner id, the static environment last) at its place.
@@ -1017,6 +1072,15 @@ impl CellModel for RigidBodyModel {
             // that forms one with it move as the joint solve moves it; as a lower body, it
             // takes each upper body's impulses, spread over its solve as a force.
             for (lower, offset) in &found.supports {
+                // Rejected at once (the test the load system makes, on what `own` touches):
+                // `own` touches another body in the cells both cells contain.
+                if found
+                    .touches
+                    .iter()
+                    .any(|t| t.id != lower.id() && shared_by(t.offset, [0; 3], *offset))
+                {
+                    continue;
+                }
                 let Some(loads) =
                     self.solved_load(own, [0; 3], lower, *offset, nb, &mut cache, &mut solved)
                 else {
@@ -1039,6 +1103,15 @@ impl CellModel for RigidBodyModel {
             let mut load = load::LoadEffect::default();
             if !self.is_asleep(own) {
                 for (upper, _, offset) in &found.carried {
+                    // Rejected at once: `own` touches, in the cells both cells contain, a body
+                    // that is neither its support nor an awake body resting on it.
+                    if found
+                        .touches
+                        .iter()
+                        .any(|t| !t.in_load && shared_by(t.offset, *offset, [0; 3]))
+                    {
+                        continue;
+                    }
                     let Some(loads) =
                         self.solved_load(upper, *offset, own, [0; 3], nb, &mut cache, &mut solved)
                     else {
