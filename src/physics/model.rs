@@ -1270,19 +1270,21 @@ impl CellModel for RigidBodyModel {
     }
 
     /// A body's step reads a neighbour through `can_reach` (contacts and waking), for the
-    /// matching of its symmetric pairs the partners of its partners, and for a load system
-    /// (SPEC.md §5.2) the partners of the other bodies resting on its support: any body within
-    /// three contacts (`r_i + r_k + 4·r_max + 3·prediction` between centres). An all-asleep
-    /// neighbourhood freezes exactly the bodies no awake body reaches.
+    /// matching of its symmetric pairs the partners of its partners (two contacts:
+    /// `r_i + r_k + 2·(r_max + prediction)` between centres), and with gravity, for a load
+    /// system (SPEC.md §5.2), the partners of the other bodies resting on its support (three
+    /// contacts: `r_i + r_k + 4·r_max + 3·prediction`). An all-asleep neighbourhood freezes
+    /// exactly the bodies no awake body reaches.
     fn may_affect(&self, reader: &Body, other: &Body) -> bool {
         if self.can_reach(reader, other) {
             return true;
         }
-        let three = reader.bounding_radius()
+        let contacts = if self.up().is_some() { 3.0 } else { 2.0 };
+        let within = reader.bounding_radius()
             + other.bounding_radius()
-            + 4.0 * self.max_radius
-            + 3.0 * self.prediction();
-        (reader.position - other.position).norm_squared() <= three * three
+            + 2.0 * (contacts - 1.0) * self.max_radius
+            + contacts * self.prediction();
+        (reader.position - other.position).norm_squared() <= within * within
     }
     /// Asleep, with both velocities exactly `+0.0`: an all-asleep neighbourhood gives every
     /// body of the centre cell its frozen copy (same pose and counter, zero velocities,
