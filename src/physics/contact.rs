@@ -15,7 +15,8 @@ pub struct ContactPoint {
     pub anchor: Vec3,
     /// The partner's surface point at step `t`, world frame.
     pub partner_point: Vec3,
-    /// The velocity of the partner's point at step `t` (zero for static surfaces).
+    /// The velocity of the partner's point at step `t` (zero for static surfaces); for a load
+    /// system's support, its velocity at the end of the joint solve (SPEC.md §5.2).
     pub partner_velocity: Vec3,
     /// Unit normal from the partner towards `i`, world frame.
     pub normal: Vec3,
@@ -63,10 +64,11 @@ pub enum SetRole {
     /// moves after the pair's response (`j` immovable, inverse mass 0), with no position
     /// correction (the pair corrects the overlap), friction or bounce (both the pair's).
     Paired,
-    /// A support in a load system (SPEC.md §5.2, "Load"): treated as [`SetRole::Whole`]
-    /// (immovable, with position correction, friction and bounce), but its points move as
-    /// the joint solve of the load moves the support, and `i` follows them through the whole
-    /// step, not only its first substep.
+    /// A support in a load system (SPEC.md §5.2, "Load"): immovable, with position
+    /// correction, friction and bounce, as [`SetRole::Whole`]; but its points move as the
+    /// joint solve of the load moves the support, and `i` follows them through the whole step
+    /// with the closing allowance of a movable partner (relative to the partner's motion),
+    /// not only through its first substep.
     Loaded,
 }
 

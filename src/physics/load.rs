@@ -4,8 +4,9 @@
 //! lower body never feels the weight it carries: a lever did not tip, a ball balanced on a
 //! ball on frictionless ground rolled off a lower ball that never moved, and a box thrown
 //! under another felt neither its weight nor its friction. Where the two bodies form a small
-//! system of their own — the lower body touches no other body but those it rests on and
-//! bodies resting on it alone, and those upper bodies touch no other body — the system is
+//! system of their own — in the cells both bodies' cells contain, the lower body touches no
+//! other body but those it rests on and bodies resting on it alone, and those upper bodies
+//! touch no other body — the system is
 //! solved together for one step, as a pure function of the step-`t` states that both cells
 //! compute alike: each upper body then sees the lower body move as the load moves it, and
 //! the lower body receives the impulse each upper body puts on it, as a force spread over its
@@ -25,8 +26,8 @@ const LOAD_TOLERANCE: f32 = 1e-6;
 /// Slip speeds at or below this are left alone (no direction can be taken from them), m/s.
 const SLIP_EPSILON: f32 = 1e-9;
 
-/// One upper body of a load system: a body resting on the lower one and on nothing else
-/// but the static environment.
+/// One upper body of a load system: a body resting on the lower one and touching no other
+/// body in the cells the system is read from (the static environment it may touch).
 pub(crate) struct Upper<'a> {
     /// The body.
     pub body: &'a Body,

@@ -40,7 +40,8 @@ pub struct RigidBodyModel {
     /// The declared domain: a body whose centre leaves it after a step is removed, with a
     /// `LeftDomain` event (SPEC.md §3).
     pub domain: DomainBox,
-    /// Largest bounding radius of any body (the pair matching reads two contacts deep,
+    /// Largest bounding radius of any body (the pair matching reads two contacts deep and a
+    /// load system three,
     /// [`CellModel::may_affect`]).
     pub max_radius: f32,
 }
@@ -1101,6 +1102,9 @@ impl CellModel for RigidBodyModel {
                 }
             }
             let mut load = load::LoadEffect::default();
+            // The upper bodies whose load `own` takes (ascending id): their weight and inertia
+            // hold `own` back, so they need no carried set.
+            let mut loading: Vec<BodyId> = Vec::new();
             if !self.is_asleep(own) {
                 for (upper, _, offset) in &found.carried {
                     // Rejected at once: `own` touches, in the cells both cells contain, a body
@@ -1120,6 +1124,7 @@ impl CellModel for RigidBodyModel {
                     if let Some(theirs) = loads.iter().find(|l| l.id == upper.id()) {
                         load.dv += theirs.lower_dv;
                         load.dw += theirs.lower_dw;
+                        loading.push(upper.id());
                     }
                 }
             }
@@ -1176,6 +1181,7 @@ impl CellModel for RigidBodyModel {
             let carried = found
                 .carried
                 .iter()
+                .filter(|(j, _, _)| loading.binary_search(&j.id()).is_err())
                 .map(|(j, m, _)| carried_contact(&start, j, m));
             for set in carried.chain(paired) {
                 if approaches(&start, &set) {

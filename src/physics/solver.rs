@@ -260,11 +260,12 @@ fn passing_pile_sets(
 }
 
 /// Where body `i`'s solve holds a partner's point at the end of substep `through` (counted
-/// from 1; SPEC.md §5.3, "The per-body solve"). A support or the static environment: its
+/// from 1; SPEC.md §5.3, "The per-body solve"). A support (other than a load system's) or the static environment: its
 /// step-`t` point advanced by one substep of its step-`t` velocity, whatever the substep (a
 /// support's downward velocity may be stopped in its own solve; holding it keeps `i` from
 /// following it into the ground). A movable partner beside `i` (pile, carried and paired
-/// sets): advanced by `through` substeps, so `i` can follow a partner that moves on through
+/// sets, and a load system's support, [`SetRole::Loaded`]): advanced by `through` substeps,
+/// so `i` can follow a partner that moves on through
 /// the step (held after the first substep, a ball pushed along with its neighbour at
 /// 0.5 m/s was stopped against it every step and kept only 0.325 m/s; a cube, 0).
 fn partner_at(role: SetRole, cp: &ContactPoint, h: f32, through: u32) -> Vec3 {
@@ -279,7 +280,7 @@ fn partner_at(role: SetRole, cp: &ContactPoint, h: f32, through: u32) -> Vec3 {
 /// How fast body `i` may close a contact point's gap within a substep, and how fast the
 /// partner's point moves towards `i` (`n·v_j`); the impact pass's target for `i`'s normal
 /// velocity is `min(towards − allowance, 0)` (`allowance` at most `landing_speed` for a held
-/// set). Against the static environment and a support: `towards = 0` and the allowance closes
+/// set). Against the static environment and a support (other than a load system's): `towards = 0` and the allowance closes
 /// the gap `gap0` at the end of the substep (the partner where [`partner_at`] holds it). Beside
 /// a movable partner the allowance is relative to the partner: the gap at the start of the
 /// substep, never less than 0, so `i` follows a partner that moves away (at most as fast as
