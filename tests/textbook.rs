@@ -43,6 +43,19 @@ fn run(scene: Scene, steps: u32) -> Vec<Vec<Body>> {
         .collect()
 }
 
+/// Panics unless every body moves slower than 1 mm/s and turns slower than 1 mrad/s.
+fn assert_at_rest(bodies: &[Body]) {
+    for b in bodies {
+        assert!(
+            b.linvel.norm() < 1e-3 && b.angvel.norm() < 1e-3,
+            "body {} still moves: v {:?}, ω {:?}",
+            b.id(),
+            b.linvel,
+            b.angvel
+        );
+    }
+}
+
 /// Mechanical energy (kinetic + potential under `gravity`), J.
 fn mechanical_energy(b: &Body, gravity: [f32; 3]) -> f64 {
     kinetic_energy([b]) + potential_energy([b], Vec3::from(gravity))
@@ -168,14 +181,8 @@ fn a_pyramid_of_bricks_stands_still() {
             + (b.position.z - p0[2]).powi(2))
         .sqrt();
         assert!(moved < 1e-3, "brick {} moved {moved} m", b.id());
-        assert!(
-            b.linvel.norm() < 1e-3 && b.angvel.norm() < 1e-3,
-            "brick {} still moves: v {:?}, ω {:?}",
-            b.id(),
-            b.linvel,
-            b.angvel
-        );
     }
+    assert_at_rest(last);
 }
 
 /// A body's mass, kg.
@@ -264,15 +271,7 @@ fn a_box_on_the_end_of_a_balanced_plank_tips_the_lever_at_the_rigid_rate() {
         "the plank's end is {lowest} m above the ground at step 40"
     );
     let last = states.last().unwrap();
-    for b in last {
-        assert!(
-            b.linvel.norm() < 1e-3 && b.angvel.norm() < 1e-3,
-            "body {} still moves at the end: v {:?}, ω {:?}",
-            b.id(),
-            b.linvel,
-            b.angvel
-        );
-    }
+    assert_at_rest(last);
     assert!(
         last[1].position.x > 1.0 && last[1].position.x < 1.5,
         "the box left the plank's end: x {}",

@@ -55,11 +55,9 @@ pub(crate) struct LoadSystem<'a> {
 pub(crate) struct UpperLoad {
     /// The upper body's id.
     pub id: crate::model::BodyId,
-    /// The lower body's velocity change from this upper body's impulses over the step
-    /// (linear, angular), to be spread over its solve.
-    pub lower_dv: Vec3,
-    /// See `lower_dv`.
-    pub lower_dw: Vec3,
+    /// The lower body's velocity change from this upper body's impulses over the step, to
+    /// be spread over its solve.
+    pub lower: LoadEffect,
     /// What the upper body sees its support move at, at each point of its manifold (in
     /// manifold order): the lower body's linear velocity at the end of the joint solve, with
     /// its normal part that of the lower body's point there, spin included. (The spin's
@@ -78,6 +76,12 @@ pub(crate) struct LoadEffect {
 }
 
 impl LoadEffect {
+    /// Sums two loads.
+    pub fn add(&mut self, o: &LoadEffect) {
+        self.dv += o.dv;
+        self.dw += o.dw;
+    }
+
     /// Whether there is no load at all.
     pub fn is_none(&self) -> bool {
         self.dv == Vec3::zeros() && self.dw == Vec3::zeros()
@@ -296,8 +300,10 @@ pub(crate) fn solve_load(system: &LoadSystem<'_>, gravity: Vec3, dt: f32) -> Vec
             }
             UpperLoad {
                 id: upper.body.id(),
-                lower_dv: dv * l.inv_mass,
-                lower_dw: lower_inv_inertia * torque,
+                lower: LoadEffect {
+                    dv: dv * l.inv_mass,
+                    dw: lower_inv_inertia * torque,
+                },
                 point_velocities,
             }
         })

@@ -72,7 +72,7 @@ struct Contacts<'a> {
     supports: Vec<(&'a Body, [i32; 3])>,
     /// Every body it touches, in the order met: what rejects a load system before its
     /// cells are read.
-    touches: Vec<Touch>,
+    touches: smallvec::SmallVec<[Touch; 8]>,
     /// Symmetric pair contacts, ascending partner id.
     pairs: Vec<PairEntry<'a>>,
     /// Whether every body partner with contact points was quiet at step `t` (SPEC.md §5.4).
@@ -107,9 +107,23 @@ fn shared_by(o: [i32; 3], a: [i32; 3], b: [i32; 3]) -> bool {
 /// Manifolds of the pairs computed for one cell, keyed by (lower id, higher id).
 type ManifoldCache = Vec<(BodyId, BodyId, Option<PairManifold>)>;
 
-/// Load systems solved for one cell whose two bodies are both in it, keyed by (upper id,
-/// lower id); `None` where the pair forms none.
-type SolvedLoads = Vec<((BodyId, BodyId), Option<std::rc::Rc<Vec<load::UpperLoad>>>)>;
+/// Load systems solved for one cell whose bodies are all in it, keyed by the lower body's
+/// id; `None` where it forms none.
+type SolvedLoads = Vec<(BodyId, Option<std::rc::Rc<Vec<load::UpperLoad>>>)>;
+
+/// An upper body resting on a lower one as a support, each with its cell relative to the
+/// centre cell: what a load system is asked for.
+#[derive(Clone, Copy)]
+struct LoadPair<'a> {
+    /// The body resting on `lower`.
+    upper: &'a Body,
+    /// `upper`'s cell.
+    upper_offset: [i32; 3],
+    /// The support, resting on the static environment.
+    lower: &'a Body,
+    /// `lower`'s cell.
+    lower_offset: [i32; 3],
+}
 
 impl RigidBodyModel {
     /// Largest displacement of a body's centre in one step (the speed cap times `dt`).
@@ -141,14 +155,12 @@ impl RigidBodyModel {
         let mut touching = false;
         let mut disturbed = false;
         let mut support_depth = u32::MAX;
-        let cap = self.prediction();
-        let (g, margin) = (self.gravity.norm(), self.params.margin);
         let slack = self.filter_slack();
         let mut sets = Vec::new();
         let mut pairs = Vec::new();
         let mut carried = Vec::new();
         let mut supports = Vec::new();
-        let mut touches = Vec::new();
+        let mut touches = smallvec::SmallVec::new();
         for c in candidates {
             if c.body.id() == own.body.id() || !own.may_touch(c, slack) {
                 continue;
@@ -166,7 +178,7 @@ impl RigidBodyModel {
             }
             let j = c.body;
             let (a, b) = canonical(own.body, j);
-            let reach = speculative_distance(a, Some(b), self.dt, g, margin, cap);
+            let reach = self.reach(a, Some(b));
             if !near(a, b, reach) || !own.boxes_within(c, reach + slack) {
                 continue;
             }
@@ -229,14 +241,7 @@ impl RigidBodyModel {
         pairs.sort_unstable_by_key(|p| p.partner.id());
         carried.sort_unstable_by_key(|c| c.0.id());
         supports.sort_unstable_by_key(|c| c.0.id());
-        let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
-        let radius = own.body.bounding_radius();
-        if let Some(env) = environment_contacts(
-            own.body,
-            &self.environment,
-            reach,
-            keep_distance(reach, radius, radius, cap),
-        ) {
+        if let Some(env) = self.environment_set(own.body) {
             if let Some(up) = self.up() {
                 if env
                     .points
@@ -279,9 +284,8 @@ impl RigidBodyModel {
     fn landing_depth(&self, own: &Candidate<'_>, candidates: &[Candidate<'_>]) -> Option<u32> {
         self.up()?; // No landing without gravity.
         let cap = self.prediction();
-        let (g, margin) = (self.gravity.norm(), self.params.margin);
         let slack = self.filter_slack();
-        let reach = speculative_distance(own.body, None, self.dt, g, margin, cap);
+        let reach = self.reach(own.body, None);
         let ahead = (2.0 * reach).min(cap);
         if self.rests_on_environment(own.body, ahead) {
             return Some(1);
@@ -299,7 +303,7 @@ impl RigidBodyModel {
                 continue;
             }
             let (a, b) = canonical(own.body, j);
-            let reach = speculative_distance(a, Some(b), self.dt, g, margin, cap);
+            let reach = self.reach(a, Some(b));
             let ahead = (2.0 * reach).min(cap);
             if !near(a, b, ahead) {
                 continue;
@@ -436,15 +440,7 @@ impl RigidBodyModel {
         if self.is_asleep(a) && self.is_asleep(b) {
             return None;
         }
-        let cap = self.prediction();
-        let reach = speculative_distance(
-            a,
-            Some(b),
-            self.dt,
-            self.gravity.norm(),
-            self.params.margin,
-            cap,
-        );
+        let reach = self.reach(a, Some(b));
         if !near(a, b, reach) {
             return None;
         }
@@ -505,6 +501,19 @@ impl RigidBodyModel {
         (mine, theirs, beaten)
     }
 
+    /// The speculative distance (SPEC.md §5.2) of `a` and partner `b`, or of `a` and the
+    /// static environment (`None`), capped at the prediction.
+    fn reach(&self, a: &Body, b: Option<&Body>) -> f32 {
+        speculative_distance(
+            a,
+            b,
+            self.dt,
+            self.gravity.norm(),
+            self.params.margin,
+            self.prediction(),
+        )
+    }
+
     /// Whether `x` and `y` touch at step `t` (a manifold within their speculative distance,
     /// the test of [`Self::contacts`]); the manifold in canonical order if so.
     fn touching(&self, x: &Body, y: &Body, cache: &mut ManifoldCache) -> Option<PairManifold> {
@@ -513,14 +522,7 @@ impl RigidBodyModel {
             return None;
         }
         let (a, b) = canonical(x, y);
-        let reach = speculative_distance(
-            a,
-            Some(b),
-            self.dt,
-            self.gravity.norm(),
-            self.params.margin,
-            self.prediction(),
-        );
+        let reach = self.reach(a, Some(b));
         // The world boxes grown by the reach, as in `Self::contacts` (a superset of the
         // manifold's test, with the same slack against rounding): most bodies beside a cube
         // within its bounding sphere's reach are dropped here, before parry.
@@ -533,14 +535,7 @@ impl RigidBodyModel {
     /// The environment contacts of `body` at step `t`, as its own solve finds them.
     fn environment_set(&self, body: &Body) -> Option<ContactSet> {
         let cap = self.prediction();
-        let reach = speculative_distance(
-            body,
-            None,
-            self.dt,
-            self.gravity.norm(),
-            self.params.margin,
-            cap,
-        );
+        let reach = self.reach(body, None);
         let radius = body.bounding_radius();
         environment_contacts(
             body,
@@ -550,29 +545,27 @@ impl RigidBodyModel {
         )
     }
 
-    /// The solved load system of `upper` resting on `lower` ([`Self::load_system`],
-    /// [`load::solve_load`]), computed once per cell for a pair whose two bodies are both in
-    /// the centre cell (both offsets 0: the same system from either side).
-    #[allow(clippy::too_many_arguments)]
+    /// The solved load system of `pair` ([`Self::load_system`], [`load::solve_load`]),
+    /// computed once per cell and lower body when both bodies are in the centre cell.
     fn solved_load<'a>(
         &self,
-        upper: &'a Body,
-        upper_offset: [i32; 3],
-        lower: &'a Body,
-        lower_offset: [i32; 3],
+        pair: &LoadPair<'a>,
         nb: &Neighbourhood<'a, Body>,
         cache: &mut ManifoldCache,
         solved: &mut SolvedLoads,
     ) -> Option<std::rc::Rc<Vec<load::UpperLoad>>> {
-        let own_pair = upper_offset == [0; 3] && lower_offset == [0; 3];
-        let key = (upper.id(), lower.id());
+        // Both in the centre cell: the system is read from the whole neighbourhood and holds
+        // every awake body resting on `lower` (or is `None` for each of them), so it is one
+        // per lower body, whichever upper body asks.
+        let own_pair = pair.upper_offset == [0; 3] && pair.lower_offset == [0; 3];
+        let key = pair.lower.id();
         if own_pair {
             if let Ok(at) = solved.binary_search_by_key(&key, |e| e.0) {
                 return solved[at].1.clone();
             }
         }
         let loads = self
-            .load_system(upper, upper_offset, lower, lower_offset, nb, cache)
+            .load_system(pair, nb, cache)
             .map(|system| std::rc::Rc::new(load::solve_load(&system, self.gravity, self.dt)));
         if own_pair {
             let at = solved.partition_point(|e| e.0 < key);
@@ -581,22 +574,25 @@ impl RigidBodyModel {
         loads
     }
 
-    /// The load system (SPEC.md §5.2, "Load") of `upper` resting on `lower` (both awake, the
-    /// contact a support), read from the cells both bodies' cells contain (`upper_offset`,
-    /// `lower_offset`: their cells relative to the centre cell), so that both cells build
+    /// The load system (SPEC.md §5.2, "Load") of `pair.upper` resting on `pair.lower` (both
+    /// awake, the contact a support), read from the cells both bodies' cells contain, so
+    /// that both cells build
     /// the same one: `lower`, the bodies it rests on and the environment as what holds it,
     /// and every awake body resting on it (`upper` among them). `None` — shock propagation
     /// alone — if `lower` touches any other body there, if an upper body touches a body other
     /// than `lower` there, or if nothing found there holds `lower` up.
     fn load_system<'a>(
         &self,
-        upper: &'a Body,
-        upper_offset: [i32; 3],
-        lower: &'a Body,
-        lower_offset: [i32; 3],
+        pair: &LoadPair<'a>,
         nb: &Neighbourhood<'a, Body>,
         cache: &mut ManifoldCache,
     ) -> Option<load::LoadSystem<'a>> {
+        let &LoadPair {
+            upper,
+            upper_offset,
+            lower,
+            lower_offset,
+        } = pair;
         let up = self.up()?;
         // Only a lower body that rests on the static environment itself: there the load's
         // path ends within the system. (Deeper in a chain, every body of a column would build
@@ -700,15 +696,7 @@ impl RigidBodyModel {
     /// pair's speculative distance, SPEC.md §5.2): the test for contacts and for waking.
     fn can_reach(&self, i: &Body, k: &Body) -> bool {
         let (a, b) = if i.id() < k.id() { (i, k) } else { (k, i) };
-        let cap = self.prediction();
-        let reach = speculative_distance(
-            a,
-            Some(b),
-            self.dt,
-            self.gravity.norm(),
-            self.params.margin,
-            cap,
-        );
+        let reach = self.reach(a, Some(b));
         near(a, b, reach)
     }
 
@@ -771,13 +759,7 @@ impl<'a> Candidate<'a> {
 
     /// Half extents of the world axis-aligned box around the shape.
     fn half_box(&self) -> Vec3 {
-        *self.half_box.get_or_init(|| match self.body.shape() {
-            Shape::Ball { radius } => Vec3::repeat(radius),
-            Shape::Cuboid { half_extents } => {
-                let m = self.body.rotation.to_rotation_matrix().into_inner().abs();
-                m * Vec3::from(half_extents)
-            }
-        })
+        *self.half_box.get_or_init(|| world_half_box(self.body))
     }
 
     /// Whether the two swept spheres (plus `slack`) overlap: a superset of the pairs whose
@@ -1082,9 +1064,17 @@ impl CellModel for RigidBodyModel {
                 {
                     continue;
                 }
-                let Some(loads) =
-                    self.solved_load(own, [0; 3], lower, *offset, nb, &mut cache, &mut solved)
-                else {
+                let Some(loads) = self.solved_load(
+                    &LoadPair {
+                        upper: own,
+                        upper_offset: [0; 3],
+                        lower,
+                        lower_offset: *offset,
+                    },
+                    nb,
+                    &mut cache,
+                    &mut solved,
+                ) else {
                     continue;
                 };
                 let Some(mine) = loads.iter().find(|l| l.id == own.id()) else {
@@ -1116,14 +1106,21 @@ impl CellModel for RigidBodyModel {
                     {
                         continue;
                     }
-                    let Some(loads) =
-                        self.solved_load(upper, *offset, own, [0; 3], nb, &mut cache, &mut solved)
-                    else {
+                    let Some(loads) = self.solved_load(
+                        &LoadPair {
+                            upper,
+                            upper_offset: *offset,
+                            lower: own,
+                            lower_offset: [0; 3],
+                        },
+                        nb,
+                        &mut cache,
+                        &mut solved,
+                    ) else {
                         continue;
                     };
                     if let Some(theirs) = loads.iter().find(|l| l.id == upper.id()) {
-                        load.dv += theirs.lower_dv;
-                        load.dw += theirs.lower_dw;
+                        load.add(&theirs.lower);
                         loading.push(upper.id());
                     }
                 }
