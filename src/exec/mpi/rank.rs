@@ -290,11 +290,18 @@ struct Rank<M: CellModel> {
 
 impl<M: CellModel> Rank<M> {
     /// Prints why this rank cannot go on and aborts every rank of the job.
+    ///
+    /// The line goes to stderr in one `write` (stderr is unbuffered, and `eprintln!` writes
+    /// each piece of its format separately), so Open MPI's abort banner, forwarded from
+    /// another process, cannot land in the middle of it.
     fn fatal(&self, what: &str) -> ! {
-        eprintln!(
-            "error: MPI rank {} of {}: {what} (GVT {}, committed step {}); aborting every rank",
+        use std::io::Write as _;
+        let line = format!(
+            "error: MPI rank {} of {}: {what} (GVT {}, committed step {}); aborting every rank\n",
             self.me, self.ranks, self.gvt, self.committed
         );
+        // Nothing is left to do if stderr is gone: the abort below still stops every rank.
+        let _ = std::io::stderr().lock().write_all(line.as_bytes());
         self.comm.abort(ABORT_CODE)
     }
 
