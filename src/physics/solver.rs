@@ -794,13 +794,15 @@ pub(crate) fn solve_body(
 
         // Position pass: each partner separately from the predicted pose (Gauss–Seidel over
         // its points, rotation linearised), corrections averaged over the partners that
-        // corrected anything.
+        // corrected anything; the pile contacts together (below), their correction added
+        // whole.
         let mut sum_dx = Vec3::zeros();
         let mut sum_dtheta = Vec3::zeros();
         let mut active = 0u32;
-        // Pile contacts (`SetRole::Pile`): the body's share of each overlap, added whole.
+        // Pile contacts (`SetRole::Pile`): the body's share of each overlap.
         let mut shared_dx = Vec3::zeros();
         let mut shared_dtheta = Vec3::zeros();
+        let mut any_pile = false;
         let mut k = 0;
         for set in sets {
             let mut dx = Vec3::zeros();
@@ -830,27 +832,57 @@ pub(crate) fn solve_body(
                     gap: cp.normal.dot(&(xp + r0 - pj)),
                 };
             }
+            let first = k;
+            k += set.points.len();
+            if set.role == SetRole::Pile {
+                // Corrected below, with the other pile contacts.
+                any_pile = true;
+                continue;
+            }
             for _ in 0..p.sweeps.max(1) {
                 for (m, cp) in set.points.iter().enumerate() {
-                    let row = &position[k + m];
+                    let row = &position[first + m];
                     let gap = row.gap + cp.normal.dot(&(dx + dtheta.cross(&row.offset)));
                     if gap < 0.0 {
                         let dl = -gap * row.inv_w;
                         dx += cp.normal * (dl * fp.inv_mass);
                         dtheta += row.irn * dl;
-                        scratch[k + m].lambda += dl;
+                        scratch[first + m].lambda += dl;
                         touched = true;
                     }
                 }
             }
-            k += set.points.len();
-            if touched && set.role == SetRole::Pile {
-                shared_dx += dx;
-                shared_dtheta += dtheta;
-            } else if touched {
+            if touched {
                 active += 1;
                 sum_dx += dx;
                 sum_dtheta += dtheta;
+            }
+        }
+        // The pile contacts' shares, in Gauss–Seidel sweeps over all their points together,
+        // so each point sees what the others' corrections already did. (Each partner's share
+        // computed apart and added whole, two partners on one side of a small ball pushed it
+        // 2.4 cm into the partner on its other side, which pushed it back in the next
+        // substep: caged by four neighbours, the ball climbed 4 mm a step, 13 cm in all, and
+        // lifted the balls above it; docs/open-defects §4.)
+        if any_pile {
+            for _ in 0..p.sweeps.max(1) {
+                let mut k = 0;
+                for set in sets {
+                    if set.role == SetRole::Pile {
+                        for (m, cp) in set.points.iter().enumerate() {
+                            let row = &position[k + m];
+                            let moved = shared_dx + shared_dtheta.cross(&row.offset);
+                            let gap = row.gap + cp.normal.dot(&moved);
+                            if gap < 0.0 {
+                                let dl = -gap * row.inv_w;
+                                shared_dx += cp.normal * (dl * fp.inv_mass);
+                                shared_dtheta += row.irn * dl;
+                                scratch[k + m].lambda += dl;
+                            }
+                        }
+                    }
+                    k += set.points.len();
+                }
             }
         }
         let shared = shared_dx != Vec3::zeros() || shared_dtheta != Vec3::zeros();
