@@ -1,6 +1,6 @@
 //! Your own model on SODA: heat spreading between walkers in a corridor, run on the three
-//! executors (the same hash) with an input injected during the run, then checked by
-//! `verify`. `cargo run --release --example custom_model`.
+//! executors (the same hash) with a scripted input, then with an input injected during the
+//! run and replayed, then checked by `verify`. `cargo run --release --example custom_model`.
 
 use soda::prelude::*;
 
@@ -67,7 +67,8 @@ impl CellModel for Heat {
     }
 }
 
-fn main() -> Result<(), ExecError> {
+/// Runs the example (public so that `tests/examples.rs` runs it too).
+pub fn main() -> Result<(), ExecError> {
     let grid = Grid::covering(Default::default(), [LENGTH, 1.0, 1.0].into(), 1.0);
     let walker = |i: u64, heat| Walker {
         id: i,
@@ -82,17 +83,45 @@ fn main() -> Result<(), ExecError> {
         RunOptions::virtual_exec(kernel.clone()),
         RunOptions::threaded(kernel, 2),
     ];
+    // A scripted input: a hot walker appears at step 60, the same bits on every executor.
+    let hot = || Input::Spawn(walker(1000, 90.0));
     for options in all {
         let run = Runner::new(Heat, grid.clone(), walkers.clone()).options(options.clone());
-        let report = run.run(200, |frame, _, control| {
-            if frame.step == 50 {
-                // A live input: a hot walker appears at step 60 (still open at step 50).
-                let hot = Input::Spawn(walker(1000, 90.0));
-                control.input(60, hot).expect("step 60 is open");
-            }
-        })?;
+        let report = run.input(60, hot()).run(200, |_, _, _| {})?;
         println!("{:<9} hash {}", options.executor, report.hash);
     }
+    // A live input, decided while the run goes: when step 50 is committed, a hot walker
+    // appears a few steps later, at a step still open. On the threaded executor the worlds
+    // may have moved past any fixed step by then (GVT runs ahead of the frames handed over),
+    // so the step is taken from the control, and taken again if GVT moved on meanwhile.
+    let mut stamped = None;
+    let threaded = RunOptions::threaded(KernelConfig::new(8), 2);
+    let live = Runner::new(Heat, grid.clone(), walkers.clone())
+        .options(threaded)
+        .run(200, |frame, _, control| {
+            if frame.step == 50 {
+                let mut step = (frame.step + 10).max(control.earliest_input_step());
+                loop {
+                    match control.input(step, hot()) {
+                        Ok(()) => break,
+                        Err(InputError::TooLate { earliest, .. }) => step = earliest + 3,
+                        Err(other) => panic!("{other}"),
+                    }
+                }
+                stamped = Some(step);
+            }
+        })?;
+    // The step it was stamped at is all a replay needs: the same input, scripted at that
+    // step, gives the live run's bits on any executor.
+    let step = stamped.expect("step 50 was committed");
+    let replay = Runner::new(Heat, grid.clone(), walkers.clone())
+        .input(step, hot())
+        .run(200, |_, _, _| {})?;
+    println!(
+        "live input stamped at step {step}: threaded hash {}, replayed on the reference {}",
+        live.hash, replay.hash
+    );
+    assert_eq!(live.hash, replay.hash);
     let options = VerifyOptions {
         steps: 60,
         schedules: 4,
