@@ -48,7 +48,11 @@ enum Command {
     Run(Box<run::RunArgs>),
     /// Continue a run from a checkpoint (`soda run --checkpoint FILE`) to the same final hash
     /// as the uninterrupted run, on any executor.
-    #[command(after_help = resume::AFTER_HELP, allow_negative_numbers = true)]
+    #[command(
+        after_help = resume::AFTER_HELP,
+        allow_negative_numbers = true,
+        mut_args = |arg: clap::Arg| arg.hide_default_value(true)
+    )]
     Resume(Box<resume::ResumeArgs>),
     /// List the built-in scenes, or print one as a TOML scene file to start your own from.
     #[command(after_help = scenes::AFTER_HELP, allow_negative_numbers = true)]

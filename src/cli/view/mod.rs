@@ -33,7 +33,7 @@ use std::time::{Duration, Instant};
 pub const AFTER_HELP: &str = "\
 Examples:
   soda view                                    falling cubes on the threaded executor, http://127.0.0.1:7878/
-  soda view --scene domino-run --worlds 8 --balance on
+  soda view --scene dense-pile --worlds 8 --balance on
   soda view --port 0 --buffer 240              a free port; 4 s of frames ahead of the display
 
 In the page: drag to orbit, wheel to zoom; click a body to push it away from the camera,
