@@ -91,24 +91,17 @@ pub fn main() -> Result<(), ExecError> {
         println!("{:<9} hash {}", options.executor, report.hash);
     }
     // A live input, decided while the run goes: when step 50 is committed, a hot walker
-    // appears a few steps later, at a step still open. On the threaded executor the worlds
-    // may have moved past any fixed step by then (GVT runs ahead of the frames handed over),
-    // so the step is taken from the control, and taken again if GVT moved on meanwhile.
+    // appears ten steps later, or at the earliest step still open: on the threaded executor
+    // the worlds may have moved past any fixed step by then (GVT runs ahead of the frames
+    // handed over). `input_from` returns the step the input was stamped at.
     let mut stamped = None;
     let threaded = RunOptions::threaded(KernelConfig::new(8), 2);
     let live = Runner::new(Heat, grid.clone(), walkers.clone())
         .options(threaded)
         .run(200, |frame, _, control| {
             if frame.step == 50 {
-                let mut step = (frame.step + 10).max(control.earliest_input_step());
-                loop {
-                    match control.input(step, hot()) {
-                        Ok(()) => break,
-                        Err(InputError::TooLate { earliest, .. }) => step = earliest + 3,
-                        Err(other) => panic!("{other}"),
-                    }
-                }
-                stamped = Some(step);
+                let step = control.input_from(frame.step + 10, hot());
+                stamped = Some(step.expect("a walker inside the corridor"));
             }
         })?;
     // The step it was stamped at is all a replay needs: the same input, scripted at that

@@ -230,16 +230,22 @@ fn a_seesaw_with_a_heavy_and_a_light_box_tips_at_the_rigid_rate_with_both_on_it(
     let alpha = rigid_lever_rate(&s);
     let states = run(s, 20);
     for step in [10usize, 20] {
-        let expected = alpha * step as f64 * dt;
         for b in &states[step - 1] {
-            let spin = -b.angvel.z as f64;
-            assert!(
-                (spin - expected).abs() < 0.05 * expected,
-                "step {step}: body {} turns at {spin} rad/s, expected {expected}",
-                b.id()
-            );
+            assert_turns_at_rigid_rate(b, alpha, step, dt);
         }
     }
+}
+
+/// Panics unless `body`, after `steps` steps of `dt` from rest, turns (clockwise about z)
+/// within 5 % of `alpha·steps·dt`, the rigid rate.
+fn assert_turns_at_rigid_rate(body: &Body, alpha: f64, steps: usize, dt: f64) {
+    let spin = -body.angvel.z as f64;
+    let expected = alpha * steps as f64 * dt;
+    assert!(
+        (spin - expected).abs() < 0.05 * expected,
+        "step {steps}: body {} turns at {spin} rad/s, expected {expected} (α = {alpha} rad/s²)",
+        body.id()
+    );
 }
 
 #[test]
@@ -253,12 +259,7 @@ fn a_box_on_the_end_of_a_balanced_plank_tips_the_lever_at_the_rigid_rate() {
     let dt = s.dt as f64;
     let alpha = rigid_lever_rate(&s);
     let states = run(s, 240);
-    let spin = -states[9][0].angvel.z as f64;
-    let expected = alpha * 10.0 * dt;
-    assert!(
-        (spin - expected).abs() < 0.05 * expected,
-        "the plank turns at {spin} rad/s after 10 steps, expected {expected} (α = {alpha} rad/s²)"
-    );
+    assert_turns_at_rigid_rate(&states[9][0], alpha, 10, dt);
     let plank = &states[39][0];
     let lowest = plank
         .shape()

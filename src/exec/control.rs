@@ -61,6 +61,31 @@ impl<'a, S> RunControl<'a, S> {
         (self.post)(step, input)
     }
 
+    /// Schedules `input` at `step`, or at the earliest step still open if that is later,
+    /// and returns the step it was stamped at. On the threaded executor GVT may move on
+    /// between [`earliest_input_step`](Self::earliest_input_step) and the post: the input is
+    /// then posted again at the earliest step the refusal names, up to 8 times. Any other
+    /// refusal is returned as it is. Replaying the input as a scripted one at the returned
+    /// step gives the run's bits on every executor.
+    pub fn input_from(&mut self, step: Step, input: Input<S>) -> Result<Step, InputError>
+    where
+        S: Clone,
+    {
+        let mut step = step.max(self.earliest);
+        let mut refused = None;
+        for _ in 0..8 {
+            match self.input(step, input.clone()) {
+                Ok(()) => return Ok(step),
+                Err(InputError::TooLate { earliest, .. }) => {
+                    refused = Some(InputError::TooLate { step, earliest });
+                    step = earliest;
+                }
+                Err(other) => return Err(other),
+            }
+        }
+        Err(refused.expect("eight refusals"))
+    }
+
     /// Stops the run after this frame: no further frame reaches the sink, and the run's
     /// report says where it stopped.
     pub fn stop(&mut self) {

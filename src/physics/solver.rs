@@ -93,6 +93,32 @@ struct PositionRow {
     gap: f32,
 }
 
+/// One Gauss–Seidel sweep of the position pass over `points` (their `rows`): each point
+/// with a gap below 0 after the correction so far (`dx`, `dtheta`) takes the position
+/// impulse `−gap·inv_w`, added to the correction and to its row of `scratch` (`lambda`).
+/// Returns whether any point corrected.
+fn position_sweep(
+    points: &[ContactPoint],
+    rows: &[PositionRow],
+    scratch: &mut [PointScratch],
+    inv_mass: f32,
+    dx: &mut Vec3,
+    dtheta: &mut Vec3,
+) -> bool {
+    let mut touched = false;
+    for ((cp, row), sc) in points.iter().zip(rows).zip(scratch) {
+        let gap = row.gap + cp.normal.dot(&(*dx + dtheta.cross(&row.offset)));
+        if gap < 0.0 {
+            let dl = -gap * row.inv_w;
+            *dx += cp.normal * (dl * inv_mass);
+            *dtheta += row.irn * dl;
+            sc.lambda += dl;
+            touched = true;
+        }
+    }
+    touched
+}
+
 /// One point's row of the impact pass, fixed for a substep.
 #[derive(Clone, Copy, Default)]
 struct ImpactRow {
@@ -839,18 +865,16 @@ pub(crate) fn solve_body(
                 any_pile = true;
                 continue;
             }
+            let rows = first..k;
             for _ in 0..p.sweeps.max(1) {
-                for (m, cp) in set.points.iter().enumerate() {
-                    let row = &position[first + m];
-                    let gap = row.gap + cp.normal.dot(&(dx + dtheta.cross(&row.offset)));
-                    if gap < 0.0 {
-                        let dl = -gap * row.inv_w;
-                        dx += cp.normal * (dl * fp.inv_mass);
-                        dtheta += row.irn * dl;
-                        scratch[first + m].lambda += dl;
-                        touched = true;
-                    }
-                }
+                touched |= position_sweep(
+                    &set.points,
+                    &position[rows.clone()],
+                    &mut scratch[rows.clone()],
+                    fp.inv_mass,
+                    &mut dx,
+                    &mut dtheta,
+                );
             }
             if touched {
                 active += 1;
@@ -868,20 +892,18 @@ pub(crate) fn solve_body(
             for _ in 0..p.sweeps.max(1) {
                 let mut k = 0;
                 for set in sets {
+                    let rows = k..k + set.points.len();
                     if set.role == SetRole::Pile {
-                        for (m, cp) in set.points.iter().enumerate() {
-                            let row = &position[k + m];
-                            let moved = shared_dx + shared_dtheta.cross(&row.offset);
-                            let gap = row.gap + cp.normal.dot(&moved);
-                            if gap < 0.0 {
-                                let dl = -gap * row.inv_w;
-                                shared_dx += cp.normal * (dl * fp.inv_mass);
-                                shared_dtheta += row.irn * dl;
-                                scratch[k + m].lambda += dl;
-                            }
-                        }
+                        position_sweep(
+                            &set.points,
+                            &position[rows.clone()],
+                            &mut scratch[rows.clone()],
+                            fp.inv_mass,
+                            &mut shared_dx,
+                            &mut shared_dtheta,
+                        );
                     }
-                    k += set.points.len();
+                    k = rows.end;
                 }
             }
         }
