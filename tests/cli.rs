@@ -259,14 +259,14 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "huge.toml",
             "radius = 0.5",
             "radius = 3.0",
-            "smaller than the domain",
+            "smaller than the domain's smallest extent",
         ),
         // A spin beyond the cap overflowed the rotation to NaN in the first step.
         (
             "spin.toml",
             "position = [2.0, 1.0, 2.0]\n",
             "position = [2.0, 1.0, 2.0]\nangular_velocity = [1e30, 0.0, 0.0]\n",
-            "bodies[0].angular_velocity` = [1e30, 0.0, 0.0] is invalid: angular speed must not exceed 60 rad/s for this body: the larger of solver.max_angular_speed = 60 rad/s and solver.max_speed / bounding radius",
+            "bodies[0].angular_velocity` = [1e30, 0, 0] is invalid: angular speed must not exceed 60 rad/s for this body: the larger of solver.max_angular_speed = 60 rad/s and solver.max_speed / bounding radius",
         ),
         // Caps and forces whose step overflows f32 (a NaN rotation, hovering bodies).
         (
@@ -279,7 +279,7 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "static.toml",
             "[domain]",
             "[[environment.cuboids]]\nposition = [50.0, 1.0, 2.0]\nhalf_extents = [1.0, 1.0, 1.0]\n\n[domain]",
-            "environment.cuboids[0].position` = [50.0, 1.0, 2.0] is invalid: the static box lies outside the domain",
+            "environment.cuboids[0].position` = [50, 1, 2] is invalid: the static box lies outside the domain",
         ),
         (
             "gravity.toml",
@@ -302,6 +302,249 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "{name}: message lacks `{mention}`: {err}"
         );
     }
+}
+
+/// A scene's body whose size is refused is named by its size field and the value as written
+/// (`bodies[0].shape.radius` = 3), never as Rust prints the shape (`Ball { radius: 3.0 }`).
+#[test]
+fn scene_error_names_the_shape_as_written_not_rust_debug() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "ball.toml",
+            "radius = 0.5",
+            "radius = 1e30",
+            "field `bodies[0].shape.radius` = 1e30 is invalid: the ball is too big for the domain: its diameter, 2e30 m, must be smaller than the domain's smallest extent (4 m)",
+        ),
+        (
+            "cuboid.toml",
+            "{ type = \"ball\", radius = 0.5 }",
+            "{ type = \"cuboid\", half_extents = [0.5, 3.0, 0.5] }",
+            "field `bodies[0].shape.half_extents` = [0.5, 3, 0.5] is invalid: the cuboid is too big for the domain: its diagonal, 6.164414 m, must be smaller",
+        ),
+        (
+            "tiny.toml",
+            "radius = 0.5",
+            "radius = 1e-20",
+            "field `bodies[0].shape.radius` = 1e-20 is invalid: the mass (0 kg)",
+        ),
+    ];
+    for (name, from, to, mention) in cases {
+        assert!(BAD_BASE.contains(from), "{name}");
+        let file = temp_file(&dir, name, &BAD_BASE.replace(from, to));
+        let err = fails(&["run", "--scene", file.to_str().unwrap(), "--steps", "1"]);
+        assert!(
+            err.contains(mention),
+            "{name}: message lacks `{mention}`: {err}"
+        );
+        for debug in ["Ball {", "Cuboid {", "radius:", "half_extents:"] {
+            assert!(
+                !err.contains(debug),
+                "{name}: Rust's Debug form `{debug}`: {err}"
+            );
+        }
+    }
+}
+
+/// Numbers and vectors in scene errors are written as in the file (`[2, 1, 9]`, `-1e7`,
+/// `nan`), not as Rust's Debug prints them (`[2.0, 1.0, 9.0]`, `-10000000.0`, `NaN`).
+#[test]
+fn scene_error_values_are_written_as_in_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            "outside.toml",
+            "position = [2.0, 1.0, 2.0]",
+            "position = [2.0, 1.0, 9.0]",
+            "field `bodies[0].position` = [2, 1, 9] is invalid: the centre must lie inside the domain: domain.min = [0, 0, 0] <= position < domain.max = [4, 4, 4] on every axis",
+        ),
+        (
+            "gravity.toml",
+            "[domain]",
+            "gravity = [0.0, -1e7, 0.0]\n\n[domain]",
+            "field `gravity` = [0, -1e7, 0] is invalid",
+        ),
+        (
+            "nan.toml",
+            "position = [2.0, 1.0, 2.0]",
+            "position = [nan, 1.0, 2.0]",
+            "field `bodies[0].position` = [nan, 1, 2] is invalid",
+        ),
+    ];
+    for (name, from, to, mention) in cases {
+        assert!(BAD_BASE.contains(from), "{name}");
+        let file = temp_file(&dir, name, &BAD_BASE.replace(from, to));
+        let err = fails(&["run", "--scene", file.to_str().unwrap(), "--steps", "1"]);
+        assert!(
+            err.contains(mention),
+            "{name}: message lacks `{mention}`: {err}"
+        );
+    }
+}
+
+/// The base of the JSON cases: BAD_BASE as JSON, a ball and a box.
+const JSON_BASE: &str = r#"{
+  "domain": { "min": [0, 0, 0], "max": [4, 4, 4] },
+  "bodies": [
+    { "id": 0, "shape": { "type": "ball", "radius": 0.5 }, "position": [1, 1, 1] },
+    { "id": 1, "shape": { "type": "cuboid", "half_extents": [0.5, 0.5, 0.5] }, "position": [3, 1, 3] }
+  ]
+}"#;
+
+/// A JSON scene's parse errors name the field at fault, inside the shape too, and in a
+/// scene's words (`expected a number`, not `expected f32`); a syntax error where a field name
+/// goes names the object it is in, never a `?` for the field.
+#[test]
+fn json_scene_errors_name_the_real_field_never_a_question_mark() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            r#""radius": 0.5"#,
+            r#""radius": "big""#,
+            "at `bodies[0].shape.radius`: invalid type: string \"big\", expected a number",
+        ),
+        (
+            r#"[0.5, 0.5, 0.5]"#,
+            r#"[0.5, 0.5, "x"]"#,
+            "at `bodies[1].shape.half_extents[2]`: invalid type: string \"x\", expected a number",
+        ),
+        (
+            r#""radius": 0.5"#,
+            r#""radius": 0.5, "colour": 3"#,
+            "at `bodies[0].shape.colour`: unknown field `colour`, expected `radius`",
+        ),
+        (
+            r#""type": "ball", "radius": 0.5"#,
+            r#""type": "ball", "half_extents": [1, 1, 1]"#,
+            "at `bodies[0].shape.half_extents`: unknown field `half_extents`, expected `radius`",
+        ),
+        (
+            r#""type": "ball""#,
+            r#""type": "sphere""#,
+            "at `bodies[0].shape.type`: unknown variant `sphere`, expected `ball` or `cuboid`",
+        ),
+        (
+            r#"{ "type": "ball", "radius": 0.5 }"#,
+            r#""ball""#,
+            "at `bodies[0].shape`: invalid type: string \"ball\", expected a shape: `type` \"ball\" with a `radius`, or `type` \"cuboid\" with `half_extents`",
+        ),
+        (
+            r#"{ "id": 0, "#,
+            r#"{ "#,
+            "at `bodies[0]`: missing field `id`",
+        ),
+        (
+            r#""id": 0,"#,
+            r#""id": -1,"#,
+            "at `bodies[0].id`: invalid value: integer `-1`, expected a whole number, 0 or more",
+        ),
+        (
+            r#""id": 1,"#,
+            r#""id": 1, "mass": 2,"#,
+            "at `bodies[1].mass`: unknown field `mass`",
+        ),
+        (
+            r#"{ "id": 0, "#,
+            "3, { \"id\": 0, ",
+            "at `bodies[0]`: invalid type: integer `3`, expected an object of fields",
+        ),
+        (
+            r#""position": [1, 1, 1] }"#,
+            r#""position": [1, 1, 1], }"#,
+            "between the fields of `bodies[0]`: syntax error: trailing comma at line 4",
+        ),
+        (
+            r#""id": 0, "shape""#,
+            r#""id": 0 "shape""#,
+            "between the fields of `bodies[0]`: syntax error: expected `,` or `}` at line 4",
+        ),
+        (
+            r#""radius": 0.5 }"#,
+            r#""radius": 0.5, }"#,
+            "between the fields of `bodies[0].shape`: syntax error: trailing comma at line 4",
+        ),
+        (
+            r#""domain""#,
+            r#"domain"#,
+            "between the top-level fields: syntax error: key must be a string at line 2",
+        ),
+    ];
+    for (from, to, mention) in cases {
+        assert_eq!(JSON_BASE.matches(from).count(), 1, "{from}");
+        let file = temp_file(&dir, "bad.json", &JSON_BASE.replacen(from, to, 1));
+        let err = fails(&["run", "--scene", file.to_str().unwrap(), "--steps", "1"]);
+        assert!(
+            err.contains(mention),
+            "{from} -> {to}: message lacks `{mention}`: {err}"
+        );
+        assert!(!err.contains(".?") && !err.contains("`?`"), "{to}: {err}");
+        for rust in ["f32", "u64", "struct", "internally tagged"] {
+            assert!(!err.contains(rust), "{to}: Rust's `{rust}`: {err}");
+        }
+    }
+    let base = temp_file(&dir, "good.json", JSON_BASE);
+    ok(&["run", "--scene", base.to_str().unwrap(), "--steps", "1"]);
+}
+
+/// An input script's parse errors name the entry and field, inside a spawned body's shape
+/// too, and a syntax error between fields names the entry rather than `inputs[0].?`.
+#[test]
+fn json_input_script_errors_name_the_entry_and_field_never_a_question_mark() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = temp_file(&dir, "scene.json", JSON_BASE);
+    let script = r#"{ "inputs": [
+  { "step": 2, "action": "push", "id": 0, "impulse": [0, 1, 0] },
+  { "step": 3, "action": "spawn", "body": { "id": 9, "position": [2, 3, 2], "shape": { "type": "ball", "radius": 0.5 } } }
+] }"#;
+    let cases = [
+        (
+            r#""impulse": [0, 1, 0] }"#,
+            r#""impulse": [0, 1, 0], }"#,
+            "between the fields of `inputs[0]`: syntax error: trailing comma",
+        ),
+        (
+            r#""radius": 0.5"#,
+            r#""radius": "x""#,
+            "at `inputs[1].body.shape.radius`: invalid type: string \"x\", expected a number",
+        ),
+        (
+            r#""step": 2"#,
+            r#""step": "two""#,
+            "at `inputs[0].step`: invalid type: string \"two\", expected a whole number, 0 or more",
+        ),
+        (
+            r#""impulse""#,
+            r#""impuls""#,
+            "at `inputs[0].impuls`: unknown field `impuls`",
+        ),
+        (
+            r#""impulse": [0, 1, 0]"#,
+            r#""impulse": [0, 1e9, 0]"#,
+            "field `inputs[0].impulse` = [0, 1e9, 0] is invalid: would change body 0's speed",
+        ),
+    ];
+    let scene = scene.to_str().unwrap();
+    for (from, to, mention) in cases {
+        assert_eq!(script.matches(from).count(), 1, "{from}");
+        let file = temp_file(&dir, "in.json", &script.replacen(from, to, 1));
+        let path = file.to_str().unwrap();
+        let err = fails(&["run", "--scene", scene, "--inputs", path, "--steps", "5"]);
+        assert!(
+            err.contains(mention),
+            "{from} -> {to}: message lacks `{mention}`: {err}"
+        );
+        assert!(!err.contains(".?") && !err.contains("f32"), "{to}: {err}");
+    }
+    let file = temp_file(&dir, "in.json", script);
+    ok(&[
+        "run",
+        "--scene",
+        scene,
+        "--inputs",
+        file.to_str().unwrap(),
+        "--steps",
+        "5",
+    ]);
 }
 
 #[test]

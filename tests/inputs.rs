@@ -130,7 +130,7 @@ fn bad_input_scripts_are_refused_naming_the_entry_and_field() {
         (
             "impulse = [0.0, 8.0, 2.0]",
             "impulse = [1e30, 8.0, 2.0]",
-            "inputs[0].impulse` = [1e30, 8.0, 2.0] is invalid: would change body 3's speed",
+            "inputs[0].impulse` = [1e30, 8, 2] is invalid: would change body 3's speed",
         ),
         (
             "impulse = [0.0, 8.0, 2.0]",
@@ -162,7 +162,7 @@ fn bad_input_scripts_are_refused_naming_the_entry_and_field() {
         (
             "position = [0.0, 9.0, 0.0]",
             "position = [0.0, 0.3, 0.0]",
-            "inputs[1].body.position` = [0.0, 0.3, 0.0] is invalid: the body overlaps the static environment by 0.2000 m",
+            "inputs[1].body.position` = [0, 0.3, 0] is invalid: the body overlaps the static environment by 0.2000 m",
         ),
         (
             "action = \"remove\"",

@@ -14,6 +14,14 @@ pub enum SceneFormat {
 }
 
 impl SceneFormat {
+    /// The format's name in messages: `TOML` or `JSON`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SceneFormat::Toml => "TOML",
+            SceneFormat::Json => "JSON",
+        }
+    }
+
     /// The format a path's extension names (`.toml` or `.json`, any case), if any.
     pub fn from_path(path: &Path) -> Option<SceneFormat> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
@@ -35,7 +43,7 @@ impl SceneFormat {
             origin: format!("scene `{}`", scene.name),
             field: "<scene>".into(),
             value: "<in memory>".into(),
-            allowed: format!("it could not be written as {self:?}: {message}"),
+            allowed: format!("it could not be written as {}: {message}", self.name()),
         };
         match self {
             SceneFormat::Toml => {
@@ -43,7 +51,7 @@ impl SceneFormat {
                     return Err(SceneError::Invalid {
                         origin: format!("scene `{}`", scene.name),
                         field: "environment.ground".into(),
-                        value: "None (no ground plane)".into(),
+                        value: "null (no ground plane)".into(),
                         allowed: "TOML has no null, so a scene without a ground cannot be written as TOML (an absent `ground` reads back as the default ground at y = 0); write it as JSON, where `\"ground\": null` means no ground".into(),
                     });
                 }
@@ -85,19 +93,93 @@ pub(crate) fn from_toml<T: serde::de::DeserializeOwned>(text: &str) -> Result<T,
         .map_err(|e| at_path(e.path(), toml_message(e.inner(), text)))
 }
 
-/// A parser's `message` prefixed with the field's path, unless the error is at the top.
+/// A parser's `message` prefixed with the field's path (`at `bodies[0].id`: ...`), unless
+/// the error is at the top.
+///
+/// Where the path holds a key the parser could not read (a JSON syntax error where a field
+/// name goes: a trailing comma, a missing comma, an unquoted name), `serde_path_to_error`
+/// writes `?`; the message says in words where it is instead: `between the fields of
+/// `bodies[0]``.
 fn at_path(path: &serde_path_to_error::Path, message: String) -> String {
-    let path = path.to_string();
-    if path.is_empty() || path == "." {
-        message
-    } else {
-        format!("at `{path}`: {message}")
+    use serde_path_to_error::Segment;
+    let mut known = String::new();
+    let mut unreadable = false;
+    for segment in path.iter() {
+        match segment {
+            Segment::Seq { index } => known += &format!("[{index}]"),
+            Segment::Map { key } | Segment::Enum { variant: key } => {
+                if !known.is_empty() {
+                    known.push('.');
+                }
+                known += key;
+            }
+            Segment::Unknown => {
+                unreadable = true;
+                break;
+            }
+        }
     }
+    match (unreadable, known.is_empty()) {
+        (false, true) => message,
+        (false, false) => format!("at `{known}`: {message}"),
+        (true, true) => format!("between the top-level fields: {message}"),
+        (true, false) => format!("between the fields of `{known}`: {message}"),
+    }
+}
+
+/// The parser's words for what it expected, in a scene file's terms rather than Rust's:
+/// `expected f32` becomes `expected a number`, `expected u64` `expected a whole number, 0
+/// or more`, `expected struct BodySpec` `expected a table of fields` (TOML) or `an object
+/// of fields` (JSON).
+fn plain_types(message: &str, format: SceneFormat) -> String {
+    let fields = match format {
+        SceneFormat::Toml => "a table of fields",
+        SceneFormat::Json => "an object of fields",
+    };
+    let mut out = String::with_capacity(message.len());
+    let mut rest = message;
+    while let Some(at) = rest.find("expected ") {
+        let (before, after) = rest.split_at(at + "expected ".len());
+        out += before;
+        let word_end = |s: &str| {
+            s.find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .unwrap_or(s.len())
+        };
+        let word = &after[..word_end(after)];
+        let plain = match word {
+            "f32" | "f64" => Some("a number"),
+            "u64" | "usize" => Some("a whole number, 0 or more"),
+            "u32" => Some("a whole number from 0 to 4294967295"),
+            "u16" => Some("a whole number from 0 to 65535"),
+            "u8" => Some("a whole number from 0 to 255"),
+            _ => None,
+        };
+        rest = match plain {
+            Some(plain) => {
+                out += plain;
+                &after[word.len()..]
+            }
+            None => match after.strip_prefix("struct ") {
+                Some(tail) => {
+                    out += fields;
+                    &tail[word_end(tail)..]
+                }
+                None => match after.strip_prefix("a sequence") {
+                    Some(tail) => {
+                        out += "an array";
+                        tail
+                    }
+                    None => after,
+                },
+            },
+        };
+    }
+    out + rest
 }
 
 /// The TOML parser's message, with the line and column when it has a location.
 pub(crate) fn toml_message(e: &toml::de::Error, text: &str) -> String {
-    let message = e.message().trim_end();
+    let message = plain_types(e.message().trim_end(), SceneFormat::Toml);
     let Some(span) = e.span() else {
         return message.to_string();
     };
@@ -153,7 +235,7 @@ pub(crate) fn json_message(e: &serde_json::Error, text: &str) -> String {
             "{kind}{e}: `{word}` is not a JSON number (JSON has no NaN or Infinity); every \
              number in a scene must be finite"
         ),
-        _ => format!("{kind}{e}"),
+        _ => format!("{kind}{}", plain_types(&e.to_string(), SceneFormat::Json)),
     }
 }
 
@@ -165,12 +247,10 @@ pub fn load_scene_file(path: &Path) -> Result<Scene, SceneError> {
         return Err(SceneError::Invalid {
             origin,
             field: "<file name>".into(),
-            value: format!(
-                "{:?}",
-                path.extension()
-                    .map(|e| e.to_string_lossy())
-                    .unwrap_or_default()
-            ),
+            value: match path.extension() {
+                Some(e) => format!("`.{}`", e.to_string_lossy()),
+                None => "no extension".into(),
+            },
             allowed: "a scene file's extension must be .toml or .json".into(),
         });
     };

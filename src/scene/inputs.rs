@@ -4,6 +4,7 @@
 //! kernel inputs that every executor applies with the same bits (SPEC.md §8, §7).
 
 use super::file::{from_json, from_toml};
+use super::show::{number, vector};
 use super::validate::{length, over_speed_cap, over_spin_cap, validate_added_body};
 use super::{BodySpec, Scene, SceneError, SceneFormat};
 use crate::kernel::{Edit, Input};
@@ -200,7 +201,7 @@ impl InputScript {
                     Err(fail(
                         i,
                         field,
-                        format!("{v:?}"),
+                        vector(v),
                         "every component must be a finite number".into(),
                     ))
                 }
@@ -304,11 +305,11 @@ impl InputScript {
                                     return Err(fail(
                                         i,
                                         "impulse",
-                                        format!("{impulse:?}"),
+                                        vector(impulse),
                                         format!(
                                             "would change body {id}'s speed by {dv:.4e} m/s (impulse / mass of {} kg), more than solver.max_speed = {} m/s: give a smaller impulse",
-                                            1.0 / b.inv_mass(),
-                                            scene.solver.max_speed
+                                            number(1.0 / b.inv_mass()),
+                                            number(scene.solver.max_speed)
                                         ),
                                     ));
                                 }
@@ -319,11 +320,12 @@ impl InputScript {
                                     return Err(fail(
                                         i,
                                         "angular_impulse",
-                                        format!("{angular:?}"),
+                                        vector(angular),
                                         format!(
-                                            "could change body {id}'s spin by up to {dw:.4e} rad/s (about its axis of least inertia, {} kg·m²), more than its spin cap of {spin_cap} rad/s (the larger of solver.max_angular_speed = {} and solver.max_speed / bounding radius): give a smaller angular impulse",
-                                            1.0 / most,
-                                            scene.solver.max_angular_speed
+                                            "could change body {id}'s spin by up to {dw:.4e} rad/s (about its axis of least inertia, {} kg·m²), more than its spin cap of {} rad/s (the larger of solver.max_angular_speed = {} and solver.max_speed / bounding radius): give a smaller angular impulse",
+                                            number(1.0 / most),
+                                            number(spin_cap),
+                                            number(scene.solver.max_angular_speed)
                                         ),
                                     ));
                                 }
@@ -335,7 +337,7 @@ impl InputScript {
                             let velocity = e.velocity.expect("checked");
                             finite("velocity", velocity)?;
                             if let Some(why) = over_speed_cap(velocity, &scene.solver) {
-                                return Err(fail(i, "velocity", format!("{velocity:?}"), why));
+                                return Err(fail(i, "velocity", vector(velocity), why));
                             }
                             if let Some(w) = e.angular_velocity {
                                 finite("angular_velocity", w)?;
@@ -343,7 +345,7 @@ impl InputScript {
                                 let over =
                                     shape.and_then(|shape| over_spin_cap(w, &shape, &scene.solver));
                                 if let Some(why) = over {
-                                    return Err(fail(i, "angular_velocity", format!("{w:?}"), why));
+                                    return Err(fail(i, "angular_velocity", vector(w), why));
                                 }
                             }
                             Input::Edit(

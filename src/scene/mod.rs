@@ -6,6 +6,8 @@ pub mod builtin;
 mod error;
 mod file;
 pub mod inputs;
+mod shape;
+mod show;
 mod validate;
 
 pub use builder::SceneBuilder;
@@ -124,6 +126,7 @@ pub struct BodySpec {
     /// Unique id.
     pub id: u64,
     /// Shape.
+    #[serde(deserialize_with = "shape::deserialize")]
     pub shape: Shape,
     /// Material.
     #[serde(default)]

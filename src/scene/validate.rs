@@ -1,5 +1,6 @@
 //! Scene validation: every rule names the field, the value and what is allowed.
 
+use super::show::{number, shape_size, vector};
 use super::{BodySpec, Scene, SceneError};
 use crate::grid::Grid;
 use crate::physics::metrics::{environment_penetration, pair_penetration};
@@ -45,17 +46,60 @@ impl<F: FnOnce() -> String> FieldName for Lazy<F> {
     }
 }
 
+/// A value in a message, written as in a scene file (see [`super::show`]).
+trait Shown {
+    fn shown(&self) -> String;
+}
+
+impl Shown for f32 {
+    fn shown(&self) -> String {
+        number(*self)
+    }
+}
+
+impl Shown for [f32; 3] {
+    fn shown(&self) -> String {
+        vector(*self)
+    }
+}
+
+impl Shown for &[f32] {
+    fn shown(&self) -> String {
+        let items: Vec<String> = self.iter().map(|&x| number(x)).collect();
+        format!("[{}]", items.join(", "))
+    }
+}
+
+impl Shown for u16 {
+    fn shown(&self) -> String {
+        self.to_string()
+    }
+}
+
+impl Shown for u32 {
+    fn shown(&self) -> String {
+        self.to_string()
+    }
+}
+
+impl Shown for u64 {
+    fn shown(&self) -> String {
+        self.to_string()
+    }
+}
+
+impl Shown for String {
+    fn shown(&self) -> String {
+        self.clone()
+    }
+}
+
 impl Checker<'_> {
-    fn fail(
-        &self,
-        field: impl Into<String>,
-        value: impl std::fmt::Debug,
-        allowed: &str,
-    ) -> SceneError {
+    fn fail(&self, field: impl Into<String>, value: impl Shown, allowed: &str) -> SceneError {
         SceneError::Invalid {
             origin: self.origin.to_string(),
             field: field.into(),
-            value: format!("{value:?}"),
+            value: value.shown(),
             allowed: allowed.to_string(),
         }
     }
@@ -123,7 +167,7 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
                 scene.domain.max[k],
                 &format!(
                     "must be greater than domain.min[{k}] = {}",
-                    scene.domain.min[k]
+                    number(scene.domain.min[k])
                 ),
             ));
         }
@@ -220,7 +264,8 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
             scene.domain.max[1],
             &format!(
                 "must lie between domain.min[1] = {} and domain.max[1] = {}",
-                scene.domain.min[1], scene.domain.max[1]
+                number(scene.domain.min[1]),
+                number(scene.domain.max[1])
             ),
         )?;
     }
@@ -264,8 +309,9 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
                 format!("environment.cuboids[{i}].position"),
                 sc.position,
                 &format!(
-                    "the static box lies outside the domain ({:?} to {:?}) beyond any body's reach: move it inside or remove it",
-                    scene.domain.min, scene.domain.max
+                    "the static box lies outside the domain ({} to {}) beyond any body's reach: move it inside or remove it",
+                    vector(scene.domain.min),
+                    vector(scene.domain.max)
                 ),
             ));
         }
@@ -294,7 +340,7 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         return Err(c.fail(
             "solver.max_speed",
             s.max_speed,
-            &format!("the cell edge derived from it (largest body + solver.margin + 2 * max_speed * dt) must be finite, got {edge}: lower solver.max_speed"),
+            &format!("the cell edge derived from it (largest body + solver.margin + 2 * max_speed * dt) must be finite, got {}: lower solver.max_speed", number(edge)),
         ));
     }
     // Counted in f64 so that a huge domain cannot overflow the count (Grid::cell_count is
@@ -305,8 +351,12 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
     if cells > Grid::MAX_CELLS as f64 {
         return Err(c.fail(
             "domain",
-            scene.domain,
-            &format!("the grid would have {cells:.3e} cells of edge {edge} m; at most {} are allowed: shrink the domain or raise cell_edge", Grid::MAX_CELLS),
+            format!(
+                "min = {}, max = {}",
+                vector(scene.domain.min),
+                vector(scene.domain.max)
+            ),
+            &format!("the grid would have {cells:.3e} cells of edge {} m; at most {} are allowed: shrink the domain or raise cell_edge", number(edge), Grid::MAX_CELLS),
         ));
     }
     let grid = scene.grid();
@@ -338,7 +388,7 @@ fn check_overlaps(scene: &Scene, grid: &Grid, c: &Checker) -> Result<(), SceneEr
                     return Err(c.fail(
                         format!("bodies[{}].position", index_of(b.id())),
                         scene.bodies[index_of(b.id())].position,
-                        &format!("body {} overlaps body {} by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move them apart", b.id(), a.id()),
+                        &format!("body {} overlaps body {} by {p:.4} m (at most {} m allowed): move them apart", b.id(), a.id(), number(OVERLAP_TOLERANCE)),
                     ));
                 }
             }
@@ -365,12 +415,20 @@ fn check_body(
             }
         }
     }
+    let (size_field, size, kind) = shape_size(&b.shape);
     let diameter = 2.0 * b.shape.bounding_radius();
     if diameter >= smallest {
+        let diameter = match b.shape {
+            Shape::Ball { .. } => format!("its diameter, {} m,", number(diameter)),
+            Shape::Cuboid { .. } => format!("its diagonal, {} m,", number(diameter)),
+        };
         return Err(c.fail(
-            f("shape"),
-            b.shape,
-            &format!("the body (bounding diameter {diameter} m) must be smaller than the domain's smallest extent ({smallest} m)"),
+            f(size_field),
+            size,
+            &format!(
+                "the {kind} is too big for the domain: {diameter} must be smaller than the domain's smallest extent ({} m)",
+                number(smallest)
+            ),
         ));
     }
     c.positive(Lazy(|| f("material.density")), b.material.density)?;
@@ -387,13 +445,13 @@ fn check_body(
     ];
     if !inverse.iter().all(|v| v.is_finite() && *v > 0.0) {
         let message = format!(
-            "the mass ({:e} kg) and moments of inertia derived from the size and density must be finite and non-zero in f32 (the body is too small or too large, or its density too extreme)",
-            b.material.density * b.shape.volume()
+            "the mass ({} kg) and moments of inertia derived from the size and density must be finite and non-zero in f32 (the body is too small or too large, or its density too extreme)",
+            number(b.material.density * b.shape.volume())
         );
         // The density is to blame when it is far outside any material's (air's ~1 kg/m³ to
         // osmium's 22,600); otherwise the size.
         return Err(if (1e-3..=1e5).contains(&b.material.density) {
-            c.fail(f("shape"), b.shape, &message)
+            c.fail(f(size_field), size, &message)
         } else {
             c.fail(f("material.density"), b.material.density, &message)
         });
@@ -422,8 +480,9 @@ fn check_body(
                 f("position"),
                 b.position,
                 &format!(
-                    "the centre must lie inside the domain: domain.min = {:?} <= position < domain.max = {:?} on every axis",
-                    scene.domain.min, scene.domain.max
+                    "the centre must lie inside the domain: domain.min = {} <= position < domain.max = {} on every axis",
+                    vector(scene.domain.min),
+                    vector(scene.domain.max)
                 ),
             ));
         }
@@ -458,11 +517,14 @@ pub fn validate_added_body(
     let f = |name: &str| format!("{field}.{name}");
     check_body(&c, scene, b, &f, smallest)?;
     if b.shape.bounding_radius() > largest {
+        let (size_field, size, kind) = shape_size(&b.shape);
         return Err(c.fail(
-            f("shape"),
-            b.shape,
+            f(size_field),
+            size,
             &format!(
-                "an added body must be no bigger than the scene's largest (bounding radius {largest} m): the grid's cells were sized for that one; add a body that big to the scene, or set the scene's cell_edge"
+                "an added body must be no bigger than the scene's largest (bounding radius {} m), and this {kind}'s bounding radius is {} m: the grid's cells were sized for the largest; add a body that big to the scene, or set the scene's cell_edge",
+                number(largest),
+                number(b.shape.bounding_radius())
             ),
         ));
     }
@@ -479,7 +541,10 @@ pub fn validate_added_body(
 fn into_environment(b: &Body, environment: &Environment) -> Option<String> {
     let p = environment_penetration(b, environment);
     (p > OVERLAP_TOLERANCE).then(|| {
-        format!("the body overlaps the static environment by {p:.4} m (at most {OVERLAP_TOLERANCE} m allowed): move it clear")
+        format!(
+            "the body overlaps the static environment by {p:.4} m (at most {} m allowed): move it clear",
+            number(OVERLAP_TOLERANCE)
+        )
     })
 }
 
@@ -488,7 +553,7 @@ pub(crate) fn over_speed_cap(velocity: [f32; 3], s: &SolverParams) -> Option<Str
     (length(velocity) > f64::from(s.max_speed)).then(|| {
         format!(
             "speed must not exceed solver.max_speed = {} m/s",
-            s.max_speed
+            number(s.max_speed)
         )
     })
 }
@@ -504,8 +569,11 @@ pub(crate) fn over_spin_cap(
     let cap = s.spin_cap(radius);
     (length(angular_velocity) > f64::from(cap)).then(|| {
         format!(
-            "angular speed must not exceed {cap} rad/s for this body: the larger of solver.max_angular_speed = {} rad/s and solver.max_speed / bounding radius = {} / {radius} m",
-            s.max_angular_speed, s.max_speed
+            "angular speed must not exceed {} rad/s for this body: the larger of solver.max_angular_speed = {} rad/s and solver.max_speed / bounding radius = {} / {} m",
+            number(cap),
+            number(s.max_angular_speed),
+            number(s.max_speed),
+            number(radius)
         )
     })
 }
