@@ -595,6 +595,80 @@ fn zero_objects_exits_non_zero_naming_the_field() {
     assert!(err.contains("objects") && err.contains('0'), "{err}");
 }
 
+/// One thing is counted in the singular: `1 frame`, `1 object`, `1 step`, `1 world`,
+/// `1 thread`, `1 run`, `1 hash`, `1 of its inputs ... comes after` (a new-user trial read
+/// `recorded 1 frames`).
+#[test]
+fn one_thing_is_counted_in_the_singular() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("one.csv");
+    let out = ok(&[
+        "run",
+        "--objects",
+        "1",
+        "--steps",
+        "0",
+        "--record",
+        rec.to_str().unwrap(),
+    ]);
+    assert!(out.contains("(built-in, 1 object, seed 0)"), "{out}");
+    assert!(out.contains("recorded         1 frame to "), "{out}");
+    let out = ok(&[
+        "verify",
+        "--objects",
+        "1",
+        "--steps",
+        "1",
+        "--worlds",
+        "1",
+        "--threads",
+        "1",
+        "--modes",
+        "cell",
+        "--schedules",
+        "1",
+        "--repeats",
+        "0",
+    ]);
+    assert!(
+        out.contains("1 step, 1 world (blocks partition), window 16, 1 thread"),
+        "{out}"
+    );
+    assert!(
+        out.contains("the 1 run committed the reference's 1 hash\n"),
+        "{out}"
+    );
+    let dump = ok(&["scenes", "--dump", "chain", "--objects", "1"]);
+    assert!(dump.contains("(1 object, seed 0)"), "{dump}");
+    let script = temp_file(
+        &dir,
+        "late.toml",
+        "[[inputs]]\nstep = 9\naction = \"remove\"\nid = 0\n",
+    );
+    let o = soda(&[
+        "run",
+        "--objects",
+        "1",
+        "--steps",
+        "2",
+        "--inputs",
+        script.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(
+            "1 of its inputs (inputs[0] at step 9) comes after the run's last step 2 and does not apply; give --steps 9 to apply it"
+        ),
+        "{}",
+        stderr(&o)
+    );
+    // (verify's per-run lines, `1 steps match`, come from the library's report.)
+    let header = out.lines().next().unwrap_or_default();
+    for plural in ["1 objects", "1 steps", "1 worlds", "1 threads"] {
+        assert!(!header.contains(plural), "{plural}: {header}");
+    }
+}
+
 #[test]
 fn record_writes_the_documented_csv() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,6 +1,7 @@
 //! SVG charts of a run trace (plotters): the space-time diagram, the territory map and the
 //! rollback heat map. SVG needs no fonts installed, and any browser or paper tool opens it.
 
+use crate::app::output::counted;
 use crate::kernel::RunTrace;
 use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
@@ -56,8 +57,8 @@ pub fn space_time(trace: &RunTrace, path: &Path) -> Result<()> {
             ChartBuilder::on(root)
                 .caption(
                     format!(
-                        "Space-time diagram: LVT of {} worlds, GVT in black",
-                        trace.worlds
+                        "Space-time diagram: LVT of {}, GVT in black",
+                        counted(trace.worlds, "world", "worlds")
                     ),
                     ("sans-serif", 20),
                 )
@@ -196,8 +197,8 @@ pub fn territory_map(trace: &RunTrace, path: &Path) -> Result<()> {
         trace,
         path,
         &format!(
-            "Territories of {} worlds (top view, majority owner of each column)",
-            trace.worlds
+            "Territories of {} (top view, majority owner of each column)",
+            counted(trace.worlds, "world", "worlds")
         ),
         |x, z| world_colour(owner(x, z)),
     )
@@ -220,7 +221,10 @@ pub fn rollback_heat_map(trace: &RunTrace, path: &Path) -> Result<()> {
     top_view(
         trace,
         path,
-        &format!("Rollback heat map: {total} cells recomputed (darkest column: {max})"),
+        &format!(
+            "Rollback heat map: {} recomputed (darkest column: {max})",
+            counted(total, "cell", "cells")
+        ),
         |x, z| {
             let f = heat[(x + nx * z) as usize] as f64 / max as f64;
             let fade = |full: f64| (255.0 - (255.0 - full) * f).round() as u8;

@@ -1,6 +1,7 @@
 //! The commands every registered model gets: run, verify, and the rollback-granularity
 //! experiment. They print to stdout and return `anyhow` errors naming the fix.
 
+use super::output::counted;
 use super::registry::{ModelSize, RegisteredModel};
 use crate::exec::virtual_exec::ScheduleSpec;
 use crate::kernel::{KernelConfig, RollbackMode};
@@ -105,9 +106,9 @@ pub fn print_report(
         "executor         {}{}",
         report.executor,
         report.kernel.as_ref().map_or(String::new(), |k| format!(
-            ", {} worlds, {} threads, mode {}, window {}",
-            k.worlds,
-            k.threads,
+            ", {}, {}, mode {}, window {}",
+            counted(k.worlds, "world", "worlds"),
+            counted(k.threads, "thread", "threads"),
             k.mode.name(),
             k.window_spec()
         ))
@@ -132,11 +133,15 @@ pub fn print_report(
     ))?;
     if let Some(k) = &report.kernel {
         crate::app::output::print_line(format_args!(
-            "kernel           {} rollbacks, efficiency {:.3}, {} cells re-executed, {} messages",
-            k.counters.total.rollbacks(),
+            "kernel           {}, efficiency {:.3}, {} re-executed, {}",
+            counted(k.counters.total.rollbacks(), "rollback", "rollbacks"),
             k.efficiency,
-            k.counters.total.cells_recomputed,
-            k.counters.total.messages_sent + k.counters.total.anti_messages_sent
+            counted(k.counters.total.cells_recomputed, "cell", "cells"),
+            counted(
+                k.counters.total.messages_sent + k.counters.total.anti_messages_sent,
+                "message",
+                "messages"
+            )
         ))?;
     }
     for note in notes {
@@ -160,13 +165,13 @@ pub fn verify(
         return Ok(());
     }
     crate::app::output::print_line(format_args!(
-        "verify           {} ({}), {} steps, {} worlds, window {}, {} threads",
+        "verify           {} ({}), {}, {}, window {}, {}",
         model.name(),
         model.about(),
-        options.steps,
-        options.kernel.worlds,
+        counted(options.steps, "step", "steps"),
+        counted(options.kernel.worlds, "world", "worlds"),
         options.kernel.window,
-        options.threads
+        counted(options.threads, "thread", "threads")
     ))?;
     // Each check is printed as it finishes; the first write that fails (a closed pipe) is
     // kept, the rest skipped, and it ends the command once the runs are done.
@@ -197,15 +202,18 @@ pub fn verify(
     }
     if !report.passed() {
         bail!(
-            "{} of {} runs diverged or the model broke its contract (see above)",
+            "{} of {} diverged or the model broke its contract (see above)",
             report.failures().count(),
-            report.runs.len()
+            counted(report.runs.len(), "run", "runs")
         );
     }
     crate::app::output::print_line(format_args!(
-        "all {} runs committed the reference's {} hashes",
-        report.runs.len(),
-        options.steps
+        "{} the reference's {}",
+        match report.runs.len() {
+            1 => "the 1 run committed".to_string(),
+            n => format!("all {n} runs committed"),
+        },
+        counted(options.steps, "hash", "hashes")
     ))?;
     Ok(())
 }

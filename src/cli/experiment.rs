@@ -11,6 +11,7 @@ use super::table::{csv_line, run_row};
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use soda::app::charts;
+use soda::app::output::counted;
 use soda::exec::reference::ReferenceRun;
 use soda::exec::virtual_exec::ScheduleSpec;
 use soda::frame::StatesWanted;
@@ -184,12 +185,17 @@ fn scalability(quick: bool, svg: &Path) -> Result<Vec<Row>> {
         let mut points = Vec::new();
         for threads in 1..=max_threads {
             let worlds = threads * factor;
-            bar.set_message(format!("{threads} threads, {worlds} worlds"));
+            let what = format!(
+                "{}, {}",
+                counted(threads, "thread", "threads"),
+                counted(worlds, "world", "worlds")
+            );
+            bar.set_message(what.clone());
             let r = run(&s, &threaded(worlds, threads, RollbackMode::Cell), steps)?;
             if r.hash != base.hash {
                 bail!(
-                    "threaded run ({threads} threads, {worlds} worlds) ended in {} but the \
-                     reference in {}: a determinism bug; please report it",
+                    "threaded run ({what}) ended in {} but the reference in {}: a determinism \
+                     bug; please report it",
                     r.hash,
                     base.hash
                 );
@@ -395,7 +401,9 @@ fn sync_share(quick: bool, svg: &Path) -> Result<Vec<Row>> {
     charts::bar_chart(
         svg,
         &format!(
-            "Share of thread time: falling-cubes {bodies}, {worlds} worlds on {threads} threads"
+            "Share of thread time: falling-cubes {bodies}, {} on {}",
+            counted(worlds, "world", "worlds"),
+            counted(threads, "thread", "threads")
         ),
         "share of thread time",
         &names,

@@ -13,6 +13,7 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::app::atomic::{self, AtomicFile};
 use soda::app::interrupt;
+use soda::app::output::counted;
 use soda::frame::StatesWanted;
 use soda::scene::{parse_inputs, InputScript};
 use soda::sim::{run_scene_from, ExecutorKind, ResumeFrom, RunOptions, RunReport};
@@ -343,17 +344,28 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
         .filter(|&i| script.inputs[i].step > last_step)
         .collect();
     if let (Some(&first), true) = (late.first(), role.root()) {
-        eprintln!(
-            "warning: `{}`: {} of its inputs (the first: inputs[{first}] at step {}) come after \
-             the run's last step {last_step} and do not apply; give --steps {} to apply them",
-            script_origin.0,
-            late.len(),
-            script.inputs[first].step,
-            late.iter()
-                .map(|&i| script.inputs[i].step)
-                .max()
-                .unwrap_or(last_step)
-        );
+        let last_input = late
+            .iter()
+            .map(|&i| script.inputs[i].step)
+            .max()
+            .unwrap_or(last_step);
+        let at = script.inputs[first].step;
+        if late.len() == 1 {
+            eprintln!(
+                "warning: `{}`: 1 of its inputs (inputs[{first}] at step {at}) comes after the \
+                 run's last step {last_step} and does not apply; give --steps {last_input} to \
+                 apply it",
+                script_origin.0,
+            );
+        } else {
+            eprintln!(
+                "warning: `{}`: {} of its inputs (the first: inputs[{first}] at step {at}) come \
+                 after the run's last step {last_step} and do not apply; give --steps \
+                 {last_input} to apply them",
+                script_origin.0,
+                late.len(),
+            );
+        }
     }
     let grid = scene.grid();
     // More worlds than cells is valid (a world may own no cell) but leaves worlds with
@@ -552,7 +564,11 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
     } else {
         let recorded = recorded.and_then(|frames| {
             let path = output.record.as_ref()?;
-            Some(format!("{frames} frames to {}", path.display()))
+            Some(format!(
+                "{} to {}",
+                counted(frames, "frame", "frames"),
+                path.display()
+            ))
         });
         let checkpointed = checkpoints.as_ref().and_then(|c| {
             let step = c.last_written()?;
@@ -787,11 +803,16 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
         (
             "grid",
             format!(
-                "cell edge {} m, {} x {} x {} cells",
+                "cell edge {} m, {} x {} x {} {}",
                 num(r.cell_edge as f64),
                 r.grid[0],
                 r.grid[1],
-                r.grid[2]
+                r.grid[2],
+                if r.grid.iter().all(|&n| n == 1) {
+                    "cell"
+                } else {
+                    "cells"
+                }
             ),
         ),
         ("wall time", format!("{} s", num(r.wall_seconds))),
@@ -826,9 +847,10 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
                 k.window_spec(),
                 k.threads,
                 if k.threads == 1 { "" } else { "s" },
-                k.mpi
-                    .as_ref()
-                    .map_or(String::new(), |m| format!(" per rank, {} ranks", m.ranks))
+                k.mpi.as_ref().map_or(String::new(), |m| format!(
+                    " per rank, {}",
+                    counted(m.ranks, "rank", "ranks")
+                ))
             ),
         ));
         lines.push((
@@ -841,30 +863,31 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
         lines.push((
             "rollbacks",
             format!(
-                "{} ({} primary, {} secondary), {} steps rolled back, {} cells recomputed",
+                "{} ({} primary, {} secondary), {} rolled back, {} recomputed",
                 c.rollbacks(),
                 c.rollbacks_primary,
                 c.rollbacks_secondary,
-                c.steps_rolled_back,
-                c.cells_recomputed
+                counted(c.steps_rolled_back, "step", "steps"),
+                counted(c.cells_recomputed, "cell", "cells")
             ),
         ));
         lines.push((
             "messages",
             format!(
-                "{} sent ({} ghost, {} migrate, {} null), {} anti-messages",
+                "{} sent ({} ghost, {} migrate, {} null), {}",
                 c.messages_sent,
                 c.ghosts_sent,
                 c.migrates_sent,
                 c.null_messages_sent,
-                c.anti_messages_sent
+                counted(c.anti_messages_sent, "anti-message", "anti-messages")
             ),
         ));
         lines.push((
             "gvt",
             format!(
-                "{} advances, peak log {} bytes",
-                k.counters.gvt_advances, c.peak_log_bytes
+                "{}, peak log {}",
+                counted(k.counters.gvt_advances, "advance", "advances"),
+                counted(c.peak_log_bytes, "byte", "bytes")
             ),
         ));
         if k.balance.enabled {
@@ -872,8 +895,11 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
             lines.push((
                 "balancing",
                 format!(
-                    "{} rounds, {} cells moved, {} famines, imbalance {:.3} (max/mean load)",
-                    b.rounds, b.cells_moved, b.famines, b.imbalance
+                    "{}, {} moved, {}, imbalance {:.3} (max/mean load)",
+                    counted(b.rounds, "round", "rounds"),
+                    counted(b.cells_moved, "cell", "cells"),
+                    counted(b.famines, "famine", "famines"),
+                    b.imbalance
                 ),
             ));
         }
@@ -881,13 +907,13 @@ fn summary(r: &RunReport, origin: &Origin, initial_bodies: usize, extras: Extras
             lines.push((
                 "thread time",
                 format!(
-                    "busy {} s (of which {} s computing ahead), gvt {} s, idle {} s (summed over threads), {} steals, {} moves",
+                    "busy {} s (of which {} s computing ahead), gvt {} s, idle {} s (summed over threads), {}, {}",
                     num(t.busy_seconds),
                     num(t.ahead_seconds),
                     num(t.gvt_seconds),
                     num(t.idle_seconds),
-                    t.steals,
-                    t.moves
+                    counted(t.steals, "steal", "steals"),
+                    counted(t.moves, "move", "moves")
                 ),
             ));
         }

@@ -58,10 +58,10 @@ fn dump(name: &str, objects: Option<usize>, seed: u64) -> Result<()> {
         .render(&scene)
         .with_context(|| format!("cannot write the built-in scene `{name}` as TOML"))?;
     let header = format!(
-        "# The built-in scene `{name}` ({} objects, seed {seed}), written by `soda scenes --dump`.\n\
+        "# The built-in scene `{name}` ({}, seed {seed}), written by `soda scenes --dump`.\n\
          # Edit it and run it with `soda run --scene FILE.toml`; docs/formats.md, \"Scene files\",\n\
          # describes every field.\n\n",
-        scene.bodies.len()
+        soda::app::output::counted(scene.bodies.len(), "object", "objects")
     );
     print(&(header + &body))
 }

@@ -42,7 +42,8 @@ impl std::fmt::Display for Origin {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Origin::Builtin { objects, seed } => {
-                write!(f, "built-in, {objects} objects, seed {seed}")
+                let objects = soda::app::output::counted(*objects, "object", "objects");
+                write!(f, "built-in, {objects}, seed {seed}")
             }
             Origin::File(p) => write!(f, "file {}", p.display()),
         }

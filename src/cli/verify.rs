@@ -9,6 +9,7 @@ use super::output::print;
 use super::source::SceneArgs;
 use anyhow::{bail, Result};
 use clap::Args;
+use soda::app::output::counted;
 use soda::kernel::{KernelConfig, PartitionKind, PlantedBug, RollbackMode, WindowSpec};
 use soda::scene::SceneFormat;
 use soda::sim::ExecutorKind;
@@ -169,14 +170,13 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         return Ok(());
     }
     print(&format!(
-        "verify           {} ({origin}), {} steps, {} worlds ({} partition), window {}, {} thread{}\n",
+        "verify           {} ({origin}), {}, {} ({} partition), window {}, {}\n",
         scene.name,
-        args.steps,
-        args.worlds,
+        counted(args.steps, "step", "steps"),
+        counted(args.worlds, "world", "worlds"),
         PartitionKind::from(args.partition).name(),
         args.window,
-        threads,
-        if threads == 1 { "" } else { "s" },
+        counted(threads, "thread", "threads"),
     ))?;
     let runs = modes.len() as u64 * (args.schedules + args.repeats + args.mpi_repeats);
     let progress = super::output::runs_bar(runs);
@@ -223,17 +223,20 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     let failed = report.failures().count();
     if failed > 0 {
         bail!(
-            "{failed} of {} runs diverged from the reference (see the lines marked DIVERGED)",
-            report.runs.len()
+            "{failed} of {} diverged from the reference (see the lines marked DIVERGED)",
+            counted(report.runs.len(), "run", "runs")
         );
     }
     if !diagnosis.is_empty() {
         bail!("the model broke its contract (see the diagnosis above)");
     }
     print(&format!(
-        "all {} runs committed the reference's {} hashes\n",
-        report.runs.len(),
-        args.steps
+        "{} the reference's {}\n",
+        match report.runs.len() {
+            1 => "the 1 run committed".to_string(),
+            n => format!("all {n} runs committed"),
+        },
+        counted(args.steps, "hash", "hashes")
     ))
 }
 

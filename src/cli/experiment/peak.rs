@@ -8,6 +8,7 @@ use anyhow::{bail, Context, Result};
 use parry3d::query;
 use parry3d::shape::{Ball, Cuboid, Shape as ParryShape};
 use soda::app::charts;
+use soda::app::output::counted;
 use soda::exec::reference::{CellCost, ReferenceRun};
 use soda::frame::StatesWanted;
 use soda::grid::Grid;
@@ -356,7 +357,11 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
                 f(gap * 1e3)
             ));
         }
-        let label = format!("MODEL (ideal optimism), {worlds} worlds on {threads} workers");
+        let label = format!(
+            "MODEL (ideal optimism), {} on {}",
+            counted(worlds, "world", "worlds"),
+            counted(threads, "worker", "workers")
+        );
         let x = |w: u64| (w as f64).log2();
         model_wall.push((
             label.clone(),
@@ -381,7 +386,11 @@ pub(super) fn peak_resistance(quick: bool, svg: &Path) -> Result<Vec<Row>> {
                     .map(|(&win, v)| ((win as f64).log2(), median(v.clone())))
                     .collect();
                 (
-                    format!("{what}, {worlds} worlds on {threads} threads"),
+                    format!(
+                        "{what}, {} on {}",
+                        counted(*worlds, "world", "worlds"),
+                        counted(threads, "thread", "threads")
+                    ),
                     points,
                 )
             })

@@ -11,6 +11,7 @@ use crate::cli::view::frames::EncodedFrame;
 use crate::cli::view::playback::Playback;
 use anyhow::{bail, Context, Result};
 use soda::app::charts;
+use soda::app::output::counted;
 use soda::frame::StatesWanted;
 use soda::kernel::KernelConfig;
 use soda::sim::{run_scene_controlled, ExecutorKind, RunOptions};
@@ -124,9 +125,13 @@ pub(super) fn peak_display(quick: bool, svg: &Path) -> Result<Vec<Row>> {
     charts::line_chart(
         svg,
         &format!(
-            "Peak with a display: peak {bodies}, {steps} steps, threaded, {threads} worlds on \
-             {threads} threads; peak x{:.1} collisions at steps {}-{}",
-            w.collision_ratio, w.landing, w.end
+            "Peak with a display: peak {bodies}, {steps} steps, threaded, {} on {}; peak x{:.1} \
+             collisions at steps {}-{}",
+            counted(threads, "world", "worlds"),
+            counted(threads, "thread", "threads"),
+            w.collision_ratio,
+            w.landing,
+            w.end
         ),
         (
             "log2 of the window W",
