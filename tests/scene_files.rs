@@ -156,7 +156,7 @@ fn infinite_gravity_is_rejected_naming_the_field() {
 #[test]
 fn nan_time_step_is_rejected_naming_the_field() {
     let text = variant(r#"name = "base""#, "name = \"base\"\ndt = nan");
-    expect_invalid(&text, "dt", &["NaN"]);
+    expect_invalid(&text, "dt", &["`dt` = nan is invalid"]);
 }
 
 #[test]
@@ -193,7 +193,11 @@ fn zero_density_is_rejected_naming_the_field() {
 #[test]
 fn body_too_large_for_the_domain_is_rejected_naming_the_field() {
     let text = variant("radius = 0.5", "radius = 6.0");
-    expect_invalid(&text, "bodies[1].shape", &["smaller than the domain"]);
+    expect_invalid(
+        &text,
+        "bodies[1].shape.radius",
+        &["= 6 is invalid", "smaller than the domain"],
+    );
 }
 
 #[test]
@@ -217,7 +221,11 @@ fn duplicate_ids_are_rejected_naming_the_field() {
 #[test]
 fn body_outside_the_domain_is_rejected_naming_the_field() {
     let text = variant("[2.0, 0.5, 0.0]", "[2.0, 0.5, 7.0]");
-    expect_invalid(&text, "bodies[1].position", &["7.0", "inside the domain"]);
+    expect_invalid(
+        &text,
+        "bodies[1].position",
+        &["= [2, 0.5, 7] is invalid", "inside the domain"],
+    );
 }
 
 #[test]
@@ -285,7 +293,7 @@ fn a_file_without_a_scene_extension_is_rejected_naming_the_extension() {
     let err = load_scene_file(Path::new("Cargo.lock")).unwrap_err();
     let msg = err.to_string();
     assert!(
-        msg.contains("\"lock\"") && msg.contains(".toml or .json"),
+        msg.contains("= `.lock` is invalid") && msg.contains(".toml or .json"),
         "{msg}"
     );
 }
