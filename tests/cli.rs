@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 mod cli_support;
 
-use cli_support::{fails, ok, soda, stderr, stdout};
+use cli_support::{fails, ok, soda, stderr, stdout, usage_error};
 
 fn is_hash(s: &str) -> bool {
     s.len() == 16
@@ -574,24 +574,24 @@ fn a_missing_scene_file_exits_non_zero_naming_it() {
 
 #[test]
 fn objects_with_a_scene_file_is_an_error_naming_the_option() {
-    let err = fails(&["run", "--scene", "scenes/two-cubes.toml", "--objects", "5"]);
+    let err = usage_error(&["run", "--scene", "scenes/two-cubes.toml", "--objects", "5"]);
     assert!(err.contains("--objects"), "{err}");
 }
 
 #[test]
 fn an_unknown_builtin_exits_non_zero_listing_the_builtins() {
-    let err = fails(&["run", "--scene", "falling-cube"]);
+    let err = usage_error(&["run", "--scene", "falling-cube"]);
     assert!(
         err.contains("falling-cube`") && err.contains("`falling-cubes`"),
         "{err}"
     );
-    let err = fails(&["scenes", "--dump", "nope"]);
+    let err = usage_error(&["scenes", "--dump", "nope"]);
     assert!(err.contains("nope"), "{err}");
 }
 
 #[test]
 fn zero_objects_exits_non_zero_naming_the_field() {
-    let err = fails(&["run", "--objects", "0", "--steps", "1"]);
+    let err = usage_error(&["run", "--objects", "0", "--steps", "1"]);
     assert!(err.contains("objects") && err.contains('0'), "{err}");
 }
 
@@ -816,27 +816,27 @@ fn a_recording_is_the_same_file_whatever_the_executor() {
 
 #[test]
 fn kernel_flags_that_do_not_apply_to_the_executor_are_errors_naming_the_fix() {
-    let err = fails(&with(&["--worlds", "4"]));
+    let err = usage_error(&with(&["--worlds", "4"]));
     assert!(
         err.contains("--worlds") && err.contains("--executor virtual"),
         "{err}"
     );
-    let err = fails(&with(&["--executor", "threaded", "--schedule-seed", "3"]));
+    let err = usage_error(&with(&["--executor", "threaded", "--schedule-seed", "3"]));
     assert!(
         err.contains("--schedule-seed") && err.contains("--executor virtual"),
         "{err}"
     );
-    let err = fails(&with(&["--executor", "virtual", "--threads", "2"]));
+    let err = usage_error(&with(&["--executor", "virtual", "--threads", "2"]));
     assert!(
         err.contains("--threads") && err.contains("--executor threaded"),
         "{err}"
     );
-    let err = fails(&with(&["--executor", "virtual", "--lead", "2"]));
+    let err = usage_error(&with(&["--executor", "virtual", "--lead", "2"]));
     assert!(
         err.contains("--lead") && err.contains("--executor threaded"),
         "{err}"
     );
-    let err = fails(&with(&["--executor", "virtual", "--schedule", "nonsense"]));
+    let err = usage_error(&with(&["--executor", "virtual", "--schedule", "nonsense"]));
     assert!(err.contains("--schedule") && err.contains("v1:"), "{err}");
     let o = soda(&with(&["--executor", "virtual", "--window", "0"]));
     assert_eq!(o.status.code(), Some(2), "a zero window is a usage error");
@@ -969,7 +969,7 @@ fn verify_checks_full_ghosts_too_and_its_reproduce_command_keeps_the_policy() {
 
 #[test]
 fn verify_rejects_an_unknown_mode_naming_the_allowed_ones() {
-    let err = fails(&["verify", "--modes", "cell,fast"]);
+    let err = usage_error(&["verify", "--modes", "cell,fast"]);
     assert!(
         err.contains("fast") && err.contains("conservative"),
         "{err}"
@@ -1106,7 +1106,7 @@ fn trace_and_counters_files_are_written_as_json() {
 
 #[test]
 fn trace_on_the_reference_executor_names_the_fix() {
-    let err = fails(&["run", "--steps", "2", "--trace", "t.json"]);
+    let err = usage_error(&["run", "--steps", "2", "--trace", "t.json"]);
     assert!(err.contains("--executor virtual"), "{err}");
 }
 
@@ -1420,7 +1420,7 @@ fn example_models_run_verify_and_experiment_from_the_cli() {
     for name in ["rigid-bodies", "epidemic", "phold"] {
         assert!(out.contains(name), "{out}");
     }
-    let err = fails(&["run", "--model", "nope"]);
+    let err = usage_error(&["run", "--model", "nope"]);
     assert!(
         err.contains("no such model") && err.contains("epidemic"),
         "{err}"
@@ -1430,7 +1430,7 @@ fn example_models_run_verify_and_experiment_from_the_cli() {
 #[test]
 fn model_runs_refuse_kernel_options_on_the_reference_and_end_their_summary_with_the_hash() {
     for flag in [["--mode", "world"], ["--worlds", "3"], ["--threads", "2"]] {
-        let err = fails(
+        let err = usage_error(
             &[
                 &["run", "--model", "epidemic", "--steps", "5"][..],
                 &flag[..],
@@ -1461,6 +1461,133 @@ fn model_runs_refuse_kernel_options_on_the_reference_and_end_their_summary_with_
             "{args:?}: the summary ends with `{last}`"
         );
         assert!(out.contains("checkpoint       "), "{out}");
+    }
+}
+
+/// A command line the command cannot take exits with status 2 (clap's usage status), what
+/// ever finds it: an option value refused after parsing (`--scene nope`, `--objects 0`,
+/// `--modes fast`, `--schedule nonsense`, `--model nope`) or options that do not go together
+/// (`--worlds` on the reference executor, `--objects` with a scene file); a new-user trial
+/// found these exiting with 1 beside clap's 2. Files that cannot be read or are refused, and
+/// runs that fail, keep status 1.
+#[test]
+fn usage_errors_exit_with_status_2_and_failures_of_files_and_runs_with_1() {
+    let dir = tempfile::tempdir().unwrap();
+    let txt = temp_file(&dir, "scene.txt", "not a scene");
+    let txt = txt.to_str().unwrap();
+    let usage: &[(&[&str], &str)] = &[
+        (&["run", "--scene", "nope"], "--scene `nope`"),
+        (&["run", "--scene", txt], "must end in .toml or .json"),
+        (&["run", "--objects", "0"], "field `objects` = 0"),
+        (
+            &["run", "--scene", "scenes/two-cubes.toml", "--objects", "3"],
+            "--objects 3 applies to built-in scenes only",
+        ),
+        (&["run", "--worlds", "4"], "add `--executor virtual`"),
+        (&["run", "--executor", "virtual", "--lead", "2"], "--lead"),
+        (
+            &["run", "--executor", "virtual", "--schedule", "nonsense"],
+            "not a schedule string",
+        ),
+        (
+            &["run", "--executor", "virtual", "--balance-period", "5"],
+            "add `--balance on`",
+        ),
+        (
+            &[
+                "run",
+                "--executor",
+                "virtual",
+                "--balance",
+                "on",
+                "--balance-thresholds",
+                "1,2",
+            ],
+            "has 2 numbers; give three",
+        ),
+        (&["run", "--trace", "t.json"], "--trace"),
+        (
+            &["run", "--inputs", "script.txt"],
+            "must end in .toml or .json",
+        ),
+        (
+            &["run", "--steps", "0", "--checkpoint", "c.ckpt"],
+            "--steps 1 or more",
+        ),
+        (&["verify", "--modes", "fast"], "not a rollback mode"),
+        (
+            &["verify", "--schedules", "0", "--repeats", "0"],
+            "no run to check",
+        ),
+        (
+            &["scenes", "--dump", "nope"],
+            "unknown built-in scene `nope`",
+        ),
+        (
+            &["scenes", "--dump", "chain", "--objects", "0"],
+            "field `objects` = 0",
+        ),
+        (&["run", "--model", "nope"], "no such model"),
+        (
+            &["run", "--model", "epidemic", "--executor", "fast"],
+            "--executor: `fast` is not an executor",
+        ),
+        (
+            &["run", "--model", "epidemic", "--worlds", "3"],
+            "add `--executor virtual`",
+        ),
+        (
+            &[
+                "experiment",
+                "granularity",
+                "--model",
+                "epidemic",
+                "--windows",
+                "0",
+            ],
+            "not a window of 1 or more",
+        ),
+        // clap's own, for comparison.
+        (
+            &["run", "--steps", "-1"],
+            "negative numbers are not allowed",
+        ),
+    ];
+    for (args, mention) in usage {
+        let err = usage_error(args);
+        assert!(err.starts_with("error: "), "soda {args:?}: {err}");
+        assert!(
+            err.contains(mention),
+            "soda {args:?} lacks `{mention}`: {err}"
+        );
+    }
+    let bad_scene = temp_file(
+        &dir,
+        "bad.toml",
+        &BAD_BASE.replace("radius = 0.5", "radius = -1.0"),
+    );
+    let bad_script = temp_file(
+        &dir,
+        "bad-script.toml",
+        "[[inputs]]\nstep = 1\naction = \"remove\"\nid = 99999\n",
+    );
+    let failures: &[&[&str]] = &[
+        &["run", "--scene", "no/such/scene.toml"],
+        &["run", "--scene", bad_scene.to_str().unwrap()],
+        &["run", "--inputs", "no/such/script.toml"],
+        &[
+            "run",
+            "--steps",
+            "1",
+            "--inputs",
+            bad_script.to_str().unwrap(),
+        ],
+        &["run", "--steps", "1", "--record", "no/such/dir/frames.csv"],
+        &["plot", "no/such/trace.json"],
+        &["resume", "no/such/run.ckpt"],
+    ];
+    for args in failures {
+        fails(args);
     }
 }
 

@@ -410,14 +410,14 @@ fn json_scene_with_nan_says_json_has_no_nan() {
 
 #[test]
 fn schedule_with_the_reference_names_the_virtual_executor_only() {
-    let err = fails(&["run", "--steps", "1", "--schedule", "v1:00"]);
+    let err = usage_error(&["run", "--steps", "1", "--schedule", "v1:00"]);
     assert!(err.contains("--executor virtual"), "{err}");
     assert!(!err.contains("threaded`"), "{err}");
 }
 
 #[test]
 fn partition_seed_without_a_seeded_partitioner_is_refused() {
-    let err = fails(&[
+    let err = usage_error(&[
         "run",
         "--steps",
         "1",
@@ -430,11 +430,11 @@ fn partition_seed_without_a_seeded_partitioner_is_refused() {
         err.contains("--partition-seed") && err.contains("kmeans"),
         "{err}"
     );
-    let err = fails(&["verify", "--steps", "1", "--partition-seed", "3"]);
+    let err = usage_error(&["verify", "--steps", "1", "--partition-seed", "3"]);
     assert!(err.contains("--partition-seed"), "{err}");
     // Equal blocks have nothing to seed either, on both commands.
     for command in [&["run", "--executor", "virtual"][..], &["verify"]] {
-        let err = fails(
+        let err = usage_error(
             &[
                 command,
                 &[
@@ -457,7 +457,7 @@ fn partition_seed_without_a_seeded_partitioner_is_refused() {
 
 #[test]
 fn verify_with_no_run_to_check_is_refused() {
-    let err = fails(&["verify", "--schedules", "0", "--repeats", "0"]);
+    let err = usage_error(&["verify", "--schedules", "0", "--repeats", "0"]);
     assert!(
         err.contains("--schedules") && err.contains("--repeats"),
         "{err}"
@@ -605,7 +605,7 @@ fn a_full_or_closed_standard_output_ends_commands_without_a_panic() {
 fn a_checkpoint_of_a_run_without_steps_is_refused_before_the_run() {
     let dir = tempfile::tempdir().unwrap();
     let ckpt = dir.path().join("z.ckpt");
-    let err = fails(&[
+    let err = usage_error(&[
         "run",
         "--objects",
         "30",

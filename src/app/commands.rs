@@ -22,7 +22,10 @@ pub fn run(
     checkpoint: Option<&super::checkpoint::CheckpointPlan>,
 ) -> Result<ModelReport> {
     if trace.is_some() && options.executor == crate::sim::ExecutorKind::Reference {
-        bail!("--trace records the Time Warp worlds, and the reference executor has none: add --executor virtual or --executor threaded");
+        return Err(super::usage(
+            "--trace records the Time Warp worlds, and the reference executor has none: add \
+             --executor virtual or --executor threaded",
+        ));
     }
     if let Some(path) = trace {
         // Refuse an unwritable target before the run, not after it.
@@ -231,7 +234,9 @@ pub fn granularity(
     steps: u64,
 ) -> Result<()> {
     if windows.is_empty() || seeds == 0 {
-        bail!("give at least one window (--windows 4,16) and one schedule (--seeds 1 or more)");
+        return Err(super::usage(
+            "give at least one window (--windows 4,16) and one schedule (--seeds 1 or more)",
+        ));
     }
     crate::app::output::print_line(format_args!(
         "model,mode,window,seeds,steps,cells_computed,cells_recomputed,rollbacks,efficiency,hash"

@@ -2,10 +2,11 @@
 
 use super::commands;
 use super::registry::{ModelSize, Registry};
+use super::usage::{exit_status, usage};
 use crate::kernel::{KernelConfig, PartitionKind, RollbackMode};
 use crate::sim::{ExecutorKind, RunOptions};
 use crate::verify::VerifyOptions;
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, Result};
 use clap::{Args, Parser, Subcommand};
 use std::process::ExitCode;
 
@@ -82,7 +83,9 @@ impl KernelArgs {
         let partition: PartitionKind = match &self.partition {
             None => PartitionKind::Blocks,
             Some(p) => p.parse().map_err(|_| {
-                anyhow!("--partition {p}: use blocks, equal-blocks, kmeans or random")
+                usage(format!(
+                    "--partition {p}: use blocks, equal-blocks, kmeans or random"
+                ))
             })?,
         };
         let window = self.window.unwrap_or(crate::kernel::WindowSpec::Fixed(16));
@@ -217,7 +220,9 @@ pub(crate) fn parse_mode(s: &str) -> Result<RollbackMode> {
         "cell" => Ok(RollbackMode::Cell),
         "world" => Ok(RollbackMode::World),
         "conservative" => Ok(RollbackMode::Conservative),
-        other => bail!("`{other}` is not a rollback mode: use cell, world or conservative"),
+        other => Err(usage(format!(
+            "`{other}` is not a rollback mode: use cell, world or conservative"
+        ))),
     }
 }
 
@@ -227,11 +232,11 @@ fn model<'a>(
 ) -> Result<(&'a dyn super::RegisteredModel, ModelSize)> {
     let m = registry.get(&args.model).ok_or_else(|| {
         let names: Vec<&str> = registry.models().map(|m| m.name()).collect();
-        anyhow!(
+        usage(format!(
             "--model {}: no such model; registered: {}",
             args.model,
             names.join(", ")
-        )
+        ))
     })?;
     Ok((
         m,
@@ -252,7 +257,10 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
         }
         Command::Run(a) => {
             let (m, size) = model(registry, &a.model)?;
-            let executor: ExecutorKind = a.executor.parse()?;
+            let executor: ExecutorKind = a
+                .executor
+                .parse()
+                .map_err(|e| usage(format!("--executor: {e}")))?;
             // As for the rigid-body runs: options of parts the executor lacks are refused,
             // not silently ignored.
             let kernel_flag = a
@@ -310,10 +318,10 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
         Command::Plot(a) => commands::plot(&a.trace, &a.out),
         Command::Experiment(a) => {
             if a.name != "granularity" {
-                bail!(
+                return Err(usage(format!(
                     "experiment `{}`: the experiment for any model is `granularity`",
                     a.name
-                );
+                )));
             }
             let (m, size) = model(registry, &a.model)?;
             let windows = a
@@ -325,10 +333,10 @@ fn dispatch(registry: &Registry, cli: ModelCli) -> Result<()> {
                         .ok()
                         .filter(|&w| w >= 1)
                         .ok_or_else(|| {
-                            anyhow!(
+                            usage(format!(
                                 "--windows {}: `{w}` is not a window of 1 or more",
                                 a.windows
-                            )
+                            ))
                         })
                 })
                 .collect::<Result<Vec<u64>>>()?;
@@ -353,7 +361,9 @@ fn resume_options(
     let c = crate::checkpoint::Checkpoint::<super::checkpoint::AppRun>::from_text(&text, &name)?;
     let mut options = c.run.options;
     if let Some(e) = executor {
-        options.executor = e.parse()?;
+        options.executor = e
+            .parse()
+            .map_err(|why| usage(format!("--executor: {why}")))?;
     }
     if let Some(t) = threads {
         options.threads = t.max(1);
@@ -374,7 +384,8 @@ pub(crate) fn parse_modes(s: &str) -> Result<Vec<RollbackMode>> {
 }
 
 /// The command line for the models of `registry`: parses the process's arguments, runs the
-/// command, prints any error with its cause and returns exit status 1 (2 for usage errors).
+/// command, prints any error with its cause and returns exit status 1, or 2 for usage errors
+/// (clap's and [`super::UsageError`]s).
 pub fn main_with(registry: Registry) -> ExitCode {
     super::allocator::configure();
     let cli = ModelCli::parse();
@@ -384,31 +395,31 @@ pub fn main_with(registry: Registry) -> ExitCode {
         Err(e) if super::output::is_broken_pipe(&e) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            ExitCode::from(exit_status(&e))
         }
     }
 }
 
-/// Refuses options of parts `executor` lacks, for every command line that runs one:
-/// `kernel_flag`, the first Time Warp option given (`--mode`, `--worlds`, ...), with the
-/// reference executor (it has no worlds), and `--threads` (`threads_given`) with any but the
-/// threaded and MPI executors.
+/// Refuses options of parts `executor` lacks, for every command line that runs one, with a
+/// [`super::UsageError`]: `kernel_flag`, the first Time Warp option given (`--mode`,
+/// `--worlds`, ...), with the reference executor (it has no worlds), and `--threads`
+/// (`threads_given`) with any but the threaded and MPI executors.
 pub fn check_executor_options(
     executor: ExecutorKind,
     kernel_flag: Option<&str>,
     threads_given: bool,
 ) -> Result<()> {
     if let (ExecutorKind::Reference, Some(flag)) = (executor, kernel_flag) {
-        bail!(
+        return Err(usage(format!(
             "{flag} configures the Time Warp worlds, which the reference executor does not \
              have: add `--executor virtual` or `--executor threaded`"
-        );
+        )));
     }
     if threads_given && executor != ExecutorKind::Threaded && executor != ExecutorKind::Mpi {
-        bail!(
+        return Err(usage(
             "--threads applies to the threaded and MPI executors only: add `--executor \
-             threaded` (or, under mpirun, `--executor mpi`)"
-        );
+             threaded` (or, under mpirun, `--executor mpi`)",
+        ));
     }
     Ok(())
 }
@@ -442,20 +453,21 @@ pub fn worlds_beyond_cells_warning(
     ))
 }
 
-/// Refuses `--partition-seed` (`seed_given`) with a partitioner that has nothing random.
+/// Refuses `--partition-seed` (`seed_given`) with a partitioner that has nothing random (a
+/// [`super::UsageError`]).
 pub fn check_partition_seed(partition: &PartitionKind, seed_given: bool) -> Result<()> {
     if seed_given && !partition.is_seeded() {
-        bail!(
+        return Err(usage(format!(
             "--partition-seed seeds the kmeans and random partitioners, and {} has nothing \
              random: add `--partition kmeans` or `--partition random`, or drop it",
             partition.name()
-        );
+        )));
     }
     Ok(())
 }
 
 /// Refuses `--checkpoint` (`checkpoint_given`) on a fresh run (`resumed` false) whose last
-/// step is 0: it computes no step, so no checkpoint would be written. A resumed run at its
+/// step is 0 (a [`super::UsageError`]): it computes no step, so no checkpoint would be written. A resumed run at its
 /// last step already has its checkpoint: the file it resumed from.
 pub fn check_checkpoint_has_a_step(
     last_step: u64,
@@ -463,10 +475,10 @@ pub fn check_checkpoint_has_a_step(
     resumed: bool,
 ) -> Result<()> {
     if last_step == 0 && checkpoint_given && !resumed {
-        bail!(
+        return Err(usage(
             "--checkpoint: the run computes no step (--steps 0), so no checkpoint would be \
-             written: give --steps 1 or more"
-        );
+             written: give --steps 1 or more",
+        ));
     }
     Ok(())
 }

@@ -27,9 +27,11 @@ pub mod interrupt;
 mod main;
 pub mod output;
 mod registry;
+pub mod usage;
 
 pub use main::{
     check_checkpoint_has_a_step, check_executor_options, check_partition_seed, main_with, run_with,
     worlds_beyond_cells_warning, ModelCli,
 };
 pub use registry::{ModelSize, RegisteredModel, Registry};
+pub use usage::{usage, UsageError};

@@ -165,7 +165,9 @@ where
             origin = c.step;
         }
         if last_step < origin {
-            bail!("--steps {last_step} is before the checkpoint's step {origin}: give {origin} or more");
+            return Err(super::usage(format!(
+                "--steps {last_step} is before the checkpoint's step {origin}: give {origin} or more"
+            )));
         }
         let wanted = match checkpoints {
             Some(plan) => StatesWanted {

@@ -4,6 +4,8 @@
 use super::numbers::whole;
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
+use soda::app::output::counted;
+use soda::app::usage;
 use soda::exec::virtual_exec::{parse_schedule, ScheduleSpec};
 use soda::kernel::{
     BalanceConfig, GhostPolicy, KernelConfig, PartitionKind, PlantedBug, RollbackMode, WindowSpec,
@@ -249,10 +251,10 @@ impl ExecutorArgs {
         }
         if executor != ExecutorKind::Virtual {
             if let Some((flag, _)) = virtual_flags.iter().find(|f| f.1) {
-                bail!(
+                return Err(usage(format!(
                     "{flag} drives the virtual executor's scheduler: add `--executor virtual` \
                      (threaded runs are scheduled by the operating system)"
-                );
+                )));
             }
         }
         soda::app::check_executor_options(
@@ -261,16 +263,19 @@ impl ExecutorArgs {
             self.threads.is_some(),
         )?;
         if self.lead.is_some() && executor != ExecutorKind::Threaded {
-            bail!(
+            return Err(usage(
                 "--lead paces the threaded executor's worlds: add `--executor threaded` (the \
-                 virtual executor's pace is its schedule)"
-            );
+                 virtual executor's pace is its schedule)",
+            ));
         }
         let partition = self.partition.map_or(PartitionKind::Blocks, Into::into);
         soda::app::check_partition_seed(&partition, self.partition_seed.is_some())?;
         let schedule = match (&self.schedule, self.schedule_seed) {
             (Some(s), _) => parse_schedule(s).map_err(|e| {
-                anyhow::anyhow!("--schedule `{}` is not a schedule string: {e}", short(s))
+                usage(format!(
+                    "--schedule `{}` is not a schedule string: {e}",
+                    short(s)
+                ))
             })?,
             (None, seed) => ScheduleSpec::Seeded(seed.unwrap_or(0)),
         };
@@ -321,7 +326,9 @@ impl ExecutorArgs {
             || self.balance_cooldown.is_some()
             || self.balance_workers.is_some();
         if tuning && !b.enabled {
-            bail!("the --balance-* options tune load balancing, which is off: add `--balance on`");
+            return Err(usage(
+                "the --balance-* options tune load balancing, which is off: add `--balance on`",
+            ));
         }
         if let Some(p) = self.balance_period {
             b.period = p;
@@ -338,19 +345,19 @@ impl ExecutorArgs {
                 .map(|x| x.trim().parse::<f64>())
                 .collect::<Result<_, _>>()
                 .map_err(|_| {
-                    anyhow::anyhow!(
+                    usage(format!(
                         "--balance-thresholds `{}` is not three numbers `UNDER,HIGH,OVER` \
                          (for example 0.8,1.2,1.5)",
                         short(t)
-                    )
+                    ))
                 })?;
             let [u, h, o] = v[..] else {
-                bail!(
-                    "--balance-thresholds `{}` has {} numbers; give three, `UNDER,HIGH,OVER` \
-                     (for example 0.8,1.2,1.5)",
+                return Err(usage(format!(
+                    "--balance-thresholds `{}` has {}; give three, `UNDER,HIGH,OVER` (for \
+                     example 0.8,1.2,1.5)",
                     short(t),
-                    v.len()
-                );
+                    counted(v.len(), "number", "numbers")
+                )));
             };
             (b.underloaded, b.high, b.overloaded) = (u, h, o);
         }
@@ -364,7 +371,7 @@ impl ExecutorArgs {
             b.workers = w as usize;
         }
         b.validate()
-            .map_err(|e| anyhow::anyhow!("--balance options: {e}"))?;
+            .map_err(|e| usage(format!("--balance options: {e}")))?;
         Ok(b)
     }
 }

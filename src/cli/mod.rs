@@ -106,7 +106,7 @@ fn model_arg(args: &[std::ffi::OsString]) -> Option<String> {
 }
 
 /// Parses the command line, runs the command and turns any error into a message on stderr
-/// and exit status 1 (usage errors exit with clap's status 2).
+/// and exit status 1 (usage errors, clap's and [`soda::app::UsageError`]s, exit with status 2).
 pub fn main() -> ExitCode {
     let args = help_help(std::env::args_os().collect());
     // Another model than rigid bodies: the generic command line over the example models.
@@ -154,7 +154,9 @@ fn run_rigid(cli: Cli, matches: &clap::ArgMatches) -> anyhow::Result<()> {
     }
 }
 
-/// Turns a command's result into an exit status, printing an error and its causes.
+/// Turns a command's result into an exit status, printing an error and its causes: 2 for a
+/// usage error (a [`soda::app::UsageError`]: an option's value the command does not take, or
+/// options that do not go together), as clap's own; 1 for any other.
 fn report(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -170,7 +172,7 @@ fn report(result: anyhow::Result<()>) -> ExitCode {
                 let text = cause.to_string().replace('\n', "\n  ");
                 eprintln!("  caused by: {text}");
             }
-            ExitCode::FAILURE
+            ExitCode::from(soda::app::usage::exit_status(&e))
         }
     }
 }

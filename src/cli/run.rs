@@ -14,6 +14,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::app::atomic::{self, AtomicFile};
 use soda::app::interrupt;
 use soda::app::output::counted;
+use soda::app::usage;
 use soda::frame::StatesWanted;
 use soda::scene::{parse_inputs, InputScript};
 use soda::sim::{run_scene_from, ExecutorKind, ResumeFrom, RunOptions, RunReport};
@@ -269,10 +270,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
 /// Reads and parses an input script (validated against the scene by `execute`).
 pub(super) fn read_script(path: &Path) -> Result<InputScript> {
     let Some(format) = soda::scene::SceneFormat::from_path(path) else {
-        bail!(
+        return Err(usage(format!(
             "--inputs `{}`: an input script's name must end in .toml or .json",
             path.display()
-        );
+        )));
     };
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read the input script `{}`", path.display()))?;
@@ -299,18 +300,18 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
     } = job;
     if output.trace.is_some() {
         if options.executor == ExecutorKind::Reference {
-            bail!(
+            return Err(usage(
                 "--trace records the Time Warp kernel's worlds, and the reference executor has \
-                 none; add --executor virtual or --executor threaded"
-            );
+                 none; add --executor virtual or --executor threaded",
+            ));
         }
         options.kernel.trace = true;
     }
     if output.territories.is_some() && options.executor == ExecutorKind::Reference {
-        bail!(
+        return Err(usage(
             "--territories draws the Time Warp worlds' territories, and the reference executor \
-             has none; add --executor virtual or --executor threaded"
-        );
+             has none; add --executor virtual or --executor threaded",
+        ));
     }
     // Before the MPI role split: every rank refuses alike.
     soda::app::check_checkpoint_has_a_step(last_step, checkpoint.is_some(), from.is_some())?;
@@ -325,10 +326,10 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
     };
     let first_step = from.as_ref().map_or(0, |f| f.step);
     if last_step < first_step {
-        bail!(
+        return Err(usage(format!(
             "--steps {last_step} is before the checkpoint's step {first_step}: give --steps \
              {first_step} or more"
-        );
+        )));
     }
     let steps = last_step - first_step;
     // Every entry is checked against the scene (from step 1: a resumed run's script is the

@@ -52,8 +52,13 @@ fn list() -> String {
 }
 
 fn dump(name: &str, objects: Option<usize>, seed: u64) -> Result<()> {
-    let scene = builtin(name, objects, seed)
-        .with_context(|| format!("cannot dump the built-in scene `{name}`"))?;
+    // Built from the options alone: what refuses it is a usage error (an unknown name,
+    // `--objects` out of range).
+    let scene = builtin(name, objects, seed).map_err(|e| {
+        anyhow::Error::new(e).context(soda::app::UsageError(format!(
+            "cannot dump the built-in scene `{name}`"
+        )))
+    })?;
     let body = SceneFormat::Toml
         .render(&scene)
         .with_context(|| format!("cannot write the built-in scene `{name}` as TOML"))?;

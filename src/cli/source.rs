@@ -2,8 +2,9 @@
 //! scene file (`.toml` / `.json`).
 
 use super::checkpoint::SceneSource;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
+use soda::app::{usage, UsageError};
 use soda::scene::builtin::{builtin, BUILTINS};
 use soda::scene::{parse_scene, SceneFormat};
 use soda::{Scene, SceneError};
@@ -63,11 +64,11 @@ impl SceneArgs {
         let path = Path::new(&self.scene);
         if let Some(format) = SceneFormat::from_path(path) {
             if let Some(n) = self.objects {
-                bail!(
+                return Err(usage(format!(
                     "--objects {n} applies to built-in scenes only, but --scene `{}` is a scene file: \
                      its bodies are the ones listed in the file",
                     self.scene
-                );
+                )));
             }
             let context = || format!("cannot load scene file `{}`", self.scene);
             let text = std::fs::read_to_string(path)
@@ -88,13 +89,15 @@ impl SceneArgs {
             return Ok((scene, Origin::File(path.to_path_buf()), source));
         }
         if !BUILTINS.iter().any(|b| b.name == self.scene) && path.exists() {
-            bail!(
+            return Err(usage(format!(
                 "--scene `{}` is not a built-in scene name, and as a file it lacks a scene \
                  extension: scene files must end in .toml or .json",
                 self.scene
-            );
+            )));
         }
         let seed = self.seed.unwrap_or(0);
+        // A built-in is built from the options alone: what refuses it is a usage error
+        // (`--scene` unknown, `--objects` out of range).
         let scene = builtin(&self.scene, self.objects, seed).map_err(|e| {
             let context = match e {
                 SceneError::UnknownBuiltin(_) => format!(
@@ -103,7 +106,7 @@ impl SceneArgs {
                 ),
                 _ => format!("cannot build the built-in scene `{}`", self.scene),
             };
-            anyhow::Error::new(e).context(context)
+            anyhow::Error::new(e).context(UsageError(context))
         })?;
         let objects = scene.bodies.len();
         let source = SceneSource::Builtin {

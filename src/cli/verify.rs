@@ -132,10 +132,10 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     let (scene, origin) = scene_args.load()?;
     let modes = parse_modes(&args.modes)?;
     if args.schedules == 0 && args.repeats == 0 && args.mpi_repeats == 0 {
-        bail!(
+        return Err(soda::app::usage(
             "--schedules 0 and --repeats 0 leave no run to check: give at least one schedule \
-             (--schedules K), threaded run (--repeats R) or MPI run (--mpi-repeats K)"
-        );
+             (--schedules K), threaded run (--repeats R) or MPI run (--mpi-repeats K)",
+        ));
     }
     // Under mpirun: MPI starts before anything is printed, and only rank 0 prints.
     let role = super::mpi::Role::under_mpi(args.mpi_repeats > 0)?;
@@ -304,10 +304,12 @@ fn parse_modes(s: &str) -> Result<Vec<RollbackMode>> {
             "cell" => ModeArg::Cell,
             "world" => ModeArg::World,
             "conservative" => ModeArg::Conservative,
-            other => bail!(
-                "--modes `{s}`: `{other}` is not a rollback mode; use `all` or a comma-separated \
-                 list of cell, world, conservative"
-            ),
+            other => {
+                return Err(soda::app::usage(format!(
+                    "--modes `{s}`: `{other}` is not a rollback mode; use `all` or a \
+                     comma-separated list of cell, world, conservative"
+                )))
+            }
         };
         let m = RollbackMode::from(m);
         if !modes.contains(&m) {
