@@ -1591,6 +1591,57 @@ fn usage_errors_exit_with_status_2_and_failures_of_files_and_runs_with_1() {
     }
 }
 
+/// The model command line's numbers say what to give, as the rigid-body one's: `--steps -1`
+/// was `unexpected argument '-1' found` and `--worlds 0` `0 is not in 1..=4096`.
+#[test]
+fn model_command_numbers_say_what_to_give() {
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["run", "--model", "epidemic", "--steps", "-1"],
+            "'--steps <N>': negative numbers are not allowed: give a whole number 0 or more",
+        ),
+        (
+            &[
+                "run",
+                "--model",
+                "epidemic",
+                "--executor",
+                "threaded",
+                "--worlds",
+                "0",
+            ],
+            "'--worlds <N>': out of range: give a whole number from 1 to 4096",
+        ),
+        (
+            &[
+                "run",
+                "--model",
+                "epidemic",
+                "--executor",
+                "threaded",
+                "--threads",
+                "0",
+            ],
+            "'--threads <T>': out of range: give a whole number 1 or more",
+        ),
+        (
+            &["verify", "--model", "phold", "--schedules", "-2"],
+            "'--schedules <K>': negative numbers are not allowed",
+        ),
+        (
+            &["run", "--model", "epidemic", "--entities", "many"],
+            "'--entities <N>': not a whole number",
+        ),
+    ];
+    for (args, mention) in cases {
+        let err = usage_error(args);
+        assert!(
+            err.contains(mention),
+            "soda {args:?} lacks `{mention}`: {err}"
+        );
+    }
+}
+
 #[cfg(not(feature = "mpi"))]
 #[test]
 fn the_mpi_executor_asks_for_a_build_with_the_mpi_feature() {

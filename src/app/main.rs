@@ -1,6 +1,7 @@
 //! The command line of [`main_with`]: parsing (clap) and dispatch to [`super::commands`].
 
 use super::commands;
+use super::numbers::{count, count_from, whole};
 use super::registry::{ModelSize, Registry};
 use super::usage::{exit_status, usage};
 use crate::kernel::{KernelConfig, PartitionKind, RollbackMode};
@@ -24,14 +25,18 @@ enum Command {
     /// List the registered models.
     Models,
     /// Run a model on an executor and print a summary ending with the final hash.
+    #[command(allow_negative_numbers = true)]
     Run(RunArgs),
     /// Continue a run from its checkpoint (`run --checkpoint FILE`) to the same final hash as
     /// the uninterrupted run.
+    #[command(allow_negative_numbers = true)]
     Resume(ResumeArgs),
     /// Check that the virtual and threaded executors commit the reference's bits, with the
     /// contract checker and a diagnosis.
+    #[command(allow_negative_numbers = true)]
     Verify(VerifyArgs),
     /// Rollback granularity: cell against world rollback per optimism window (CSV).
+    #[command(allow_negative_numbers = true)]
     Experiment(ExperimentArgs),
     /// Draw a trace written by `run --trace` (space-time diagram, territory map, rollback
     /// heat map, SVG).
@@ -55,10 +60,10 @@ pub struct ModelArgs {
     #[arg(long, value_name = "NAME")]
     pub model: String,
     /// Entities at step 0 [default: the model's].
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = count)]
     pub entities: Option<usize>,
     /// Seed of the initial states and the model's randomness.
-    #[arg(long, value_name = "S", default_value_t = 1)]
+    #[arg(long, value_name = "S", default_value_t = 1, value_parser = whole(0, u64::MAX))]
     pub seed: u64,
 }
 
@@ -67,7 +72,7 @@ pub struct ModelArgs {
 #[derive(Debug, Args, Clone)]
 pub struct KernelArgs {
     /// Worlds [default: 8].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=4096))]
+    #[arg(long, value_name = "N", value_parser = whole(1, 4096))]
     pub worlds: Option<u64>,
     /// Optimism window: W steps, or `auto` (`auto:W`): each world adapts its own up to 64 (W)
     /// by its rollbacks [default: 16].
@@ -112,7 +117,7 @@ struct RunArgs {
     #[command(flatten)]
     model: ModelArgs,
     /// Steps to run.
-    #[arg(long, value_name = "N", default_value_t = 300)]
+    #[arg(long, value_name = "N", default_value_t = 300, value_parser = whole(0, u64::MAX))]
     steps: u64,
     /// Executor: reference, virtual or threaded.
     #[arg(long, value_name = "E", default_value = "reference")]
@@ -121,7 +126,7 @@ struct RunArgs {
     #[arg(long, value_name = "M")]
     mode: Option<String>,
     /// Threads of the threaded executor [default: the available cores].
-    #[arg(long, value_name = "T")]
+    #[arg(long, value_name = "T", value_parser = count_from(1))]
     threads: Option<usize>,
     #[command(flatten)]
     kernel: KernelArgs,
@@ -138,7 +143,7 @@ struct RunArgs {
     checkpoint: Option<std::path::PathBuf>,
     /// With --checkpoint: steps between checkpoints.
     #[arg(long, value_name = "N", default_value_t = 100, requires = "checkpoint",
-          value_parser = clap::value_parser!(u64).range(1..))]
+          value_parser = whole(1, u64::MAX))]
     checkpoint_every: u64,
 }
 
@@ -148,14 +153,14 @@ struct ResumeArgs {
     #[arg(value_name = "FILE")]
     file: std::path::PathBuf,
     /// The step to reach [default: the checkpointed run's --steps].
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = whole(0, u64::MAX))]
     steps: Option<u64>,
     /// Executor: reference, virtual or threaded [default: the checkpointed run's, with its
     /// kernel options].
     #[arg(long, value_name = "E")]
     executor: Option<String>,
     /// Threads of the threaded executor [default: the checkpointed run's].
-    #[arg(long, value_name = "T")]
+    #[arg(long, value_name = "T", value_parser = count_from(1))]
     threads: Option<usize>,
     /// Print the report as JSON.
     #[arg(long)]
@@ -167,23 +172,23 @@ struct VerifyArgs {
     #[command(flatten)]
     model: ModelArgs,
     /// Steps compared per run.
-    #[arg(long, value_name = "N", default_value_t = 60)]
+    #[arg(long, value_name = "N", default_value_t = 60, value_parser = whole(0, u64::MAX))]
     steps: u64,
     /// Modes: all, or a comma-separated list of cell, world, conservative.
     #[arg(long, value_name = "LIST", default_value = "all")]
     modes: String,
     /// Virtual-executor schedule seeds per mode.
-    #[arg(long, value_name = "K", default_value_t = 8)]
+    #[arg(long, value_name = "K", default_value_t = 8, value_parser = whole(0, u64::MAX))]
     schedules: u64,
     /// Threaded runs per mode.
-    #[arg(long, value_name = "R", default_value_t = 3)]
+    #[arg(long, value_name = "R", default_value_t = 3, value_parser = whole(0, u64::MAX))]
     repeats: u64,
     /// MPI runs per mode, across the processes of the MPI job this runs in (`mpirun -np R
     /// BINARY verify --mpi-repeats K`, built with the `mpi` feature); rank 0 prints.
-    #[arg(long, value_name = "K", default_value_t = 0)]
+    #[arg(long, value_name = "K", default_value_t = 0, value_parser = whole(0, u64::MAX))]
     mpi_repeats: u64,
     /// Threads of the threaded runs [default: the available cores].
-    #[arg(long, value_name = "T")]
+    #[arg(long, value_name = "T", value_parser = count_from(1))]
     threads: Option<usize>,
     #[command(flatten)]
     kernel: KernelArgs,
@@ -200,10 +205,10 @@ struct ExperimentArgs {
     #[arg(long, value_name = "LIST", default_value = "4,16,64")]
     windows: String,
     /// Schedule seeds averaged per point.
-    #[arg(long, value_name = "K", default_value_t = 3)]
+    #[arg(long, value_name = "K", default_value_t = 3, value_parser = whole(0, u64::MAX))]
     seeds: u64,
     /// Steps per run.
-    #[arg(long, value_name = "N", default_value_t = 100)]
+    #[arg(long, value_name = "N", default_value_t = 100, value_parser = whole(0, u64::MAX))]
     steps: u64,
     #[command(flatten)]
     kernel: KernelArgs,

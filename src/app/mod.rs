@@ -25,6 +25,7 @@ pub mod checkpoint;
 pub mod commands;
 pub mod interrupt;
 mod main;
+pub mod numbers;
 pub mod output;
 mod registry;
 pub mod usage;
