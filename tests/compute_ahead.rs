@@ -77,3 +77,30 @@ fn without_computing_ahead_no_cell_is_computed_ahead() {
     .expect("the run commits the reference's frames");
     assert_eq!(c.total.cells_ahead, 0);
 }
+
+/// With two worlds on a wide scene the interior computed ahead outnumbers the border, so
+/// each advance computes the border without preparing the territory again, reading each
+/// border cell's rest from its neighbourhood (SPEC.md §K5 item 4); as the cubes land and
+/// fall asleep, border cells are kept at rest that way. Every committed frame is still the
+/// reference's.
+#[test]
+fn a_border_computed_after_the_interior_without_preparing_again_commits_the_reference_bits() {
+    let scene = builtin("falling-cubes", Some(1000), 3).expect("scene");
+    let (model, grid, init) = (scene.model(), scene.grid(), scene.initial_bodies());
+    let steps = 240;
+    let expected = reference(&model, &grid, &init, steps);
+    let mut ahead = 0;
+    for seed in 0..3 {
+        let config = KernelConfig::new(2)
+            .mode(RollbackMode::Cell)
+            .window(8)
+            .partition(PartitionKind::Blocks);
+        let options = VirtualOptions::seeded(seed).compute_ahead(true);
+        let c = compare(&model, &grid, &init, &config, &options, &expected)
+            .unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        let t = &c.total;
+        assert_eq!(t.cells_computed, t.cells_committed + t.cells_rolled_back);
+        ahead += t.cells_ahead;
+    }
+    assert!(ahead > 0, "no world computed ahead");
+}

@@ -34,9 +34,13 @@ impl<M: CellModel> World<M> {
         self.early = Some(h);
         let i = self.si(h);
         self.prepare(h);
-        let mut done = 0;
+        let (mut done, mut left) = (0, 0);
         for x in OwnCell::all(self.cells.len()) {
-            if !self.targets[x].is_empty() || self.slots[i].state(x).is_empty() {
+            if self.slots[i].state(x).is_empty() {
+                continue;
+            }
+            if !self.targets[x].is_empty() {
+                left += 1;
                 continue;
             }
             debug_assert!(
@@ -48,6 +52,8 @@ impl<M: CellModel> World<M> {
             done += 1;
         }
         self.counters.cells_ahead += done;
+        // Few cells left (the border): the advance computes them without preparing again.
+        self.prepare_after_ahead = left >= done;
         if done == 0 {
             // Nothing computed: the advance prepares again anyway.
             self.prepared.clear();

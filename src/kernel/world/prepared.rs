@@ -122,6 +122,11 @@ impl Prepared {
         }
     }
 
+    /// Whether the states of step `step` are prepared.
+    pub(super) fn is_prepared(&self, step: Step) -> bool {
+        self.step == Some(step)
+    }
+
     /// Forgets what it holds (the states it describes may change).
     pub(super) fn clear(&mut self) {
         self.step = None;

@@ -370,13 +370,33 @@ impl<M: CellModel> World<M> {
         );
     }
 
-    /// The output of occupied own cell `x` at the prepared step `h`: its state if its whole
-    /// neighbourhood is at rest, else its computation. (Both callers skip empty cells, whose
+    /// Whether every entity in the 27 cells around own cell `x` at step `h` is at rest
+    /// ([`CellModel::at_rest`]), read from the states themselves: what [`Prepared`] works
+    /// out for every cell at once, for the few cells an advance computes after the interior
+    /// was computed ahead.
+    ///
+    /// [`Prepared`]: super::prepared::Prepared
+    fn neighbourhood_at_rest(&self, x: OwnCell, h: Step) -> bool {
+        let slot = &self.slots[self.si(h)];
+        let model = &*self.model;
+        self.nbrs[x]
+            .iter()
+            .all(|&n| slot.neighbour(n).iter().all(|s| model.at_rest(s)))
+    }
+
+    /// The output of occupied own cell `x` at step `h`: its state if its whole
+    /// neighbourhood is at rest, else its computation (the rest flags prepared for `h`, or
+    /// read from the states if `h` is not prepared). (Both callers skip empty cells, whose
     /// output is [`Out::empty`].)
     pub(super) fn compute_or_keep(&mut self, x: OwnCell, h: Step) -> Out<M::State, M::Event> {
         let i = self.si(h);
         debug_assert!(!self.slots[i].state(x).is_empty(), "an occupied cell");
-        if self.prepared.keeps(x, h) {
+        let keeps = if self.prepared.is_prepared(h) {
+            self.prepared.keeps(x, h)
+        } else {
+            self.neighbourhood_at_rest(x, h)
+        };
+        if keeps {
             // The model's promise (`CellModel::at_rest`, SPEC.md §4.1 rule 7): the output
             // is the cell's state, bit for bit, and no event. Counted as a computation,
             // which it stands for.
@@ -401,9 +421,15 @@ impl<M: CellModel> World<M> {
         landings.reset(n, 0);
         let mut migs: BTreeSet<(OwnCell, WorldId)> = BTreeSet::new();
         // Every cell of step h reads the states of h: their hints and whether they are at
-        // rest are worked out once (again if the interior was computed ahead: views may
-        // have changed since).
-        self.prepare(h);
+        // rest are worked out once, and again if the interior was computed ahead (views may
+        // have changed since) unless what is left, the border (and any cell dropped since),
+        // is the smaller part: then it is computed without hints, each cell's rest read from
+        // its neighbourhood, rather than every cell prepared again for a few.
+        if self.early == Some(h) && !self.prepare_after_ahead {
+            self.prepared.clear();
+        } else {
+            self.prepare(h);
+        }
         // The outputs, written into the slot at once (no copy-on-write per cell).
         let outs = &mut scratch.outs;
         debug_assert!(outs.is_empty());

@@ -162,6 +162,7 @@ impl<M: CellModel> World<M> {
             origin: step,
             ghost_due: BTreeSet::new(),
             early: None,
+            prepare_after_ahead: true,
             waiting: false,
         }
     }
