@@ -222,6 +222,12 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         to_epoch_end.min(to_cap)
     }
 
+    /// Whether GVT stands at the cap of its lead over the last frame delivered: no step can
+    /// commit until the output stage takes a frame.
+    pub(super) fn output_cap_reached(&self) -> bool {
+        self.gvt.load() >= self.delivered.load() + 1 + self.undelivered
+    }
+
     /// Queues world `w` in the ready set unless it is already queued or taken. A waiting
     /// world moves to the ready set (its token goes stale): what woke it (a message, a GVT
     /// advance) may let it act, and it must not wait behind worlds that are still blocked.

@@ -64,7 +64,17 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
                     times.gvt_seconds += g0.elapsed().as_secs_f64();
                     if !advanced {
                         let i0 = Instant::now();
-                        F::pause(spins);
+                        // At the cap of frames not yet delivered, only the output stage can
+                        // let GVT move, and it takes frames at its own pace (a viewer's:
+                        // one every display frame) with the cap's frames still to take:
+                        // nap as the output stage's slow poll does rather than wake every
+                        // 50 µs, leaving the cores to the consumer.
+                        let nap = if self.output_cap_reached() {
+                            u32::MAX
+                        } else {
+                            spins
+                        };
+                        F::pause(nap);
                         spins = spins.saturating_add(1);
                         if spins % STALL_CHECK_SPINS == 0 {
                             self.check_stall();
