@@ -662,7 +662,11 @@ fn one_thing_is_counted_in_the_singular() {
         "{}",
         stderr(&o)
     );
-    // (verify's per-run lines, `1 steps match`, come from the library's report.)
+    assert!(out.contains(": 1 step matches"), "{out}");
+    assert!(
+        !out.contains("1 steps") && !out.contains(" 1 rollbacks"),
+        "{out}"
+    );
     let header = out.lines().next().unwrap_or_default();
     for plural in ["1 objects", "1 steps", "1 worlds", "1 threads"] {
         assert!(!header.contains(plural), "{plural}: {header}");

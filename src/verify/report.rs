@@ -105,19 +105,17 @@ impl fmt::Display for RunCheck {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.outcome {
             RunOutcome::Matched => {
-                write!(
-                    f,
-                    "ok       {}: {} steps match",
-                    self.name(),
-                    self.steps_matched
-                )?;
+                let steps = match self.steps_matched {
+                    1 => "1 step matches".to_string(),
+                    n => format!("{n} steps match"),
+                };
+                write!(f, "ok       {}: {steps}", self.name())?;
                 if let Some(c) = &self.counters {
-                    write!(
-                        f,
-                        ", {} rollbacks, efficiency {:.3}",
-                        c.total.rollbacks(),
-                        c.total.efficiency()
-                    )?;
+                    let rollbacks = match c.total.rollbacks() {
+                        1 => "1 rollback".to_string(),
+                        n => format!("{n} rollbacks"),
+                    };
+                    write!(f, ", {rollbacks}, efficiency {:.3}", c.total.efficiency())?;
                 }
                 Ok(())
             }
