@@ -5,7 +5,7 @@ use super::output::{Assembly, FinishedFrame, Output};
 use crate::exec::error::{ExecError, InputError};
 use crate::exec::load::LoadMeter;
 use crate::exec::schedule::Schedule;
-use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex};
+use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex, SLOW_POLL};
 use crate::exec::LastFrame;
 use crate::frame::StatesWanted;
 use crate::grid::Grid;
@@ -41,6 +41,16 @@ impl RunStatus {
             _ => unreachable!("run status {v} was never stored"),
         }
     }
+}
+
+/// When a worker first found GVT at its cap over the last frame delivered, and which frame
+/// that was ([`SharedRun::paced_by_output`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct CapSeen {
+    /// The last frame delivered then.
+    delivered: Step,
+    /// When.
+    since: Instant,
 }
 
 /// GVT stays within this many optimism windows (of at least 8 steps) of the last step the
@@ -222,10 +232,26 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         to_epoch_end.min(to_cap)
     }
 
-    /// Whether GVT stands at the cap of its lead over the last frame delivered: no step can
-    /// commit until the output stage takes a frame.
-    pub(super) fn output_cap_reached(&self) -> bool {
-        self.gvt.load() >= self.delivered.load() + 1 + self.undelivered
+    /// Whether GVT stands at the cap of its lead over the last frame delivered (no step can
+    /// commit until the output stage takes a frame) and the output stage has taken none
+    /// for at least [`SLOW_POLL`]: the run is paced by its consumer. `seen` is the calling
+    /// thread's memory of when it first saw the cap at the current delivered frame.
+    pub(super) fn paced_by_output(&self, seen: &mut Option<CapSeen>) -> bool {
+        let delivered = self.delivered.load();
+        if self.gvt.load() < delivered + 1 + self.undelivered {
+            *seen = None;
+            return false;
+        }
+        match seen {
+            Some(s) if s.delivered == delivered => s.since.elapsed() >= SLOW_POLL,
+            _ => {
+                *seen = Some(CapSeen {
+                    delivered,
+                    since: Instant::now(),
+                });
+                false
+            }
+        }
     }
 
     /// Queues world `w` in the ready set unless it is already queued or taken. A waiting

@@ -23,6 +23,7 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
         let _fail_on_unwind = EndOnUnwind::failing(self);
         let mut times = ThreadTimes::default();
         let mut spins = 0u32;
+        let mut cap_seen = None;
         while self.status() == RunStatus::Running {
             let t0 = Instant::now();
             let task = self.find_task(me, &mut times.steals);
@@ -65,11 +66,12 @@ impl<M: CellModel + 'static, F: Facade> SharedRun<M, F> {
                     if !advanced {
                         let i0 = Instant::now();
                         // At the cap of frames not yet delivered, only the output stage can
-                        // let GVT move, and it takes frames at its own pace (a viewer's:
-                        // one every display frame) with the cap's frames still to take:
-                        // nap as the output stage's slow poll does rather than wake every
-                        // 50 µs, leaving the cores to the consumer.
-                        let nap = if self.output_cap_reached() {
+                        // let GVT move. Once it has taken no frame for a slow poll's time
+                        // (a consumer paced by a display: one frame every 16 ms), nap as
+                        // its slow poll does rather than wake every 50 µs, leaving the
+                        // cores to it; an output stage that only stalled briefly keeps the
+                        // short pauses.
+                        let nap = if self.paced_by_output(&mut cap_seen) {
                             u32::MAX
                         } else {
                             spins

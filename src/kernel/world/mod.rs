@@ -163,11 +163,11 @@ pub struct World<M: CellModel> {
     /// The head step whose interior cells were computed ahead, if any
     /// ([`World::compute_interior_ahead`]): their outputs are in the log.
     early: Option<Step>,
-    /// Whether the advance of the head step computed ahead prepares its states again
-    /// (`false`: it computes what is left without [`prepared::Prepared`], reading each
-    /// left cell's rest from its neighbourhood): only when the occupied cells left to
-    /// compute outnumber those computed ahead, so a few border cells do not pay for
-    /// preparing the whole territory twice.
+    /// Whether the advance of the head step computed ahead prepares its states again:
+    /// `true` when the occupied cells left to compute are at least as many as those
+    /// computed ahead; `false` otherwise, and it computes what is left without
+    /// [`prepared::Prepared`], reading each left cell's rest from its neighbourhood, so a
+    /// few border cells do not pay for preparing the whole territory twice.
     prepare_after_ahead: bool,
     /// Cell mode with delta ghosts: its repair stopped at a step whose remaining dirty
     /// cells read a view a ghost announced to change (K5); it waits for news (cleared by
