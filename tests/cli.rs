@@ -212,6 +212,16 @@ fn every_example_scene_file_runs() {
 
 const BAD_BASE: &str = "[domain]\nmin = [0.0, 0.0, 0.0]\nmax = [4.0, 4.0, 4.0]\n\n[[bodies]]\nid = 0\nshape = { type = \"ball\", radius = 0.5 }\nposition = [2.0, 1.0, 2.0]\n";
 
+/// Runs `soda run --scene` on BAD_BASE with `from` replaced by `to` (written to `name` in
+/// `dir`), which must fail: returns the scene file's path and the error message.
+fn bad_scene_error(dir: &tempfile::TempDir, name: &str, from: &str, to: &str) -> (String, String) {
+    assert!(BAD_BASE.contains(from), "{name}");
+    let file = temp_file(dir, name, &BAD_BASE.replace(from, to));
+    let path = file.to_str().unwrap().to_string();
+    let err = fails(&["run", "--scene", &path, "--steps", "2"]);
+    (path, err)
+}
+
 #[test]
 fn the_bad_file_fixture_base_runs() {
     let dir = tempfile::tempdir().unwrap();
@@ -289,12 +299,9 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
         ),
     ];
     for (name, from, to, mention) in cases {
-        assert!(BAD_BASE.contains(from), "{name}");
-        let file = temp_file(&dir, name, &BAD_BASE.replace(from, to));
-        let path = file.to_str().unwrap();
-        let err = fails(&["run", "--scene", path, "--steps", "2"]);
+        let (path, err) = bad_scene_error(&dir, name, from, to);
         assert!(
-            err.contains(path),
+            err.contains(&path),
             "{name}: message does not name the file: {err}"
         );
         assert!(
@@ -330,9 +337,7 @@ fn scene_error_names_the_shape_as_written_not_rust_debug() {
         ),
     ];
     for (name, from, to, mention) in cases {
-        assert!(BAD_BASE.contains(from), "{name}");
-        let file = temp_file(&dir, name, &BAD_BASE.replace(from, to));
-        let err = fails(&["run", "--scene", file.to_str().unwrap(), "--steps", "1"]);
+        let (_, err) = bad_scene_error(&dir, name, from, to);
         assert!(
             err.contains(mention),
             "{name}: message lacks `{mention}`: {err}"
@@ -372,9 +377,7 @@ fn scene_error_values_are_written_as_in_the_file() {
         ),
     ];
     for (name, from, to, mention) in cases {
-        assert!(BAD_BASE.contains(from), "{name}");
-        let file = temp_file(&dir, name, &BAD_BASE.replace(from, to));
-        let err = fails(&["run", "--scene", file.to_str().unwrap(), "--steps", "1"]);
+        let (_, err) = bad_scene_error(&dir, name, from, to);
         assert!(
             err.contains(mention),
             "{name}: message lacks `{mention}`: {err}"

@@ -70,29 +70,18 @@ impl Shown for &[f32] {
     }
 }
 
-impl Shown for u16 {
-    fn shown(&self) -> String {
-        self.to_string()
-    }
+/// Whole numbers and text are shown as they print.
+macro_rules! shown_as_printed {
+    ($($t:ty),*) => {
+        $(impl Shown for $t {
+            fn shown(&self) -> String {
+                self.to_string()
+            }
+        })*
+    };
 }
 
-impl Shown for u32 {
-    fn shown(&self) -> String {
-        self.to_string()
-    }
-}
-
-impl Shown for u64 {
-    fn shown(&self) -> String {
-        self.to_string()
-    }
-}
-
-impl Shown for String {
-    fn shown(&self) -> String {
-        self.clone()
-    }
-}
+shown_as_printed!(u16, u32, u64, String);
 
 impl Checker<'_> {
     fn fail(&self, field: impl Into<String>, value: impl Shown, allowed: &str) -> SceneError {
