@@ -2,7 +2,9 @@
 //! once per advanced step in global cell order) are exactly the model's hints of the
 //! neighbourhood's entities, row by row in slot order, whatever the partition: a model
 //! wrapped to recompute and compare them on every computation runs the kernel executors
-//! and commits the reference's hashes.
+//! and commits the reference's hashes. In a sparse scene a world also hands the
+//! computations its states from one prepared copy (a row's cells side by side in memory),
+//! and commits the same hashes.
 
 use soda::frame::Event;
 use soda::grid::Grid;
@@ -16,11 +18,22 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 /// The rigid-body model, checking on every computation that each row's hints (when given)
-/// are its entities' hints in slot order, and counting the rows it checked.
+/// are its entities' hints in slot order, and counting the rows it checked and the rows
+/// whose cells it was handed side by side in memory (one array, not one allocation per
+/// cell).
 #[derive(Clone)]
 struct HintChecked {
     inner: RigidBodyModel,
     rows_checked: Arc<AtomicU64>,
+    rows_side_by_side: Arc<AtomicU64>,
+}
+
+/// Whether two non-empty cells of row `r` follow each other in memory.
+fn side_by_side(nb: &Neighbourhood<'_, Body>, r: usize) -> bool {
+    let row = &nb.cells[3 * r..3 * r + 3];
+    row.windows(2).any(|w| {
+        !w[0].is_empty() && !w[1].is_empty() && w[0].as_ptr_range().end == w[1].as_ptr_range().start
+    })
 }
 
 impl CellModel for HintChecked {
@@ -61,6 +74,9 @@ impl CellModel for HintChecked {
                 );
                 self.rows_checked.fetch_add(1, Ordering::Relaxed);
             }
+            if side_by_side(nb, r) {
+                self.rows_side_by_side.fetch_add(1, Ordering::Relaxed);
+            }
         }
         self.inner.step_cell(step, grid, nb, out, events);
     }
@@ -86,21 +102,43 @@ impl CellModel for HintChecked {
     }
 }
 
-/// Every committed hash of `options` on 400 falling cubes (the landing, then rest), and the
-/// number of hint rows the model checked.
-fn run(options: RunOptions, steps: u64) -> (Vec<u64>, u64) {
-    let scene = builtin("falling-cubes", Some(400), 0).expect("scene");
+/// What a run of the checked model saw.
+struct Seen {
+    /// Every committed hash.
+    hashes: Vec<u64>,
+    /// Hint rows checked.
+    rows: u64,
+    /// Rows handed with two cells side by side in memory.
+    side_by_side: u64,
+}
+
+/// A run of `options` on built-in scene `name` with `objects` bodies.
+fn run_scene(name: &str, objects: usize, options: RunOptions, steps: u64) -> Seen {
+    let scene = builtin(name, Some(objects), 0).expect("scene");
     let rows_checked = Arc::new(AtomicU64::new(0));
+    let rows_side_by_side = Arc::new(AtomicU64::new(0));
     let model = HintChecked {
         inner: scene.model(),
         rows_checked: rows_checked.clone(),
+        rows_side_by_side: rows_side_by_side.clone(),
     };
     let mut hashes = Vec::new();
     Runner::new(model, scene.grid(), scene.initial_bodies())
         .options(options)
         .run(steps, |f, _, _| hashes.push(f.hash))
         .expect("the run succeeds");
-    (hashes, rows_checked.load(Ordering::Relaxed))
+    Seen {
+        hashes,
+        rows: rows_checked.load(Ordering::Relaxed),
+        side_by_side: rows_side_by_side.load(Ordering::Relaxed),
+    }
+}
+
+/// Every committed hash of `options` on 400 falling cubes (the landing, then rest), and the
+/// number of hint rows the model checked.
+fn run(options: RunOptions, steps: u64) -> (Vec<u64>, u64) {
+    let seen = run_scene("falling-cubes", 400, options, steps);
+    (seen.hashes, seen.rows)
 }
 
 #[test]
@@ -124,5 +162,30 @@ fn worlds_hand_each_computation_its_neighbourhoods_hints_in_slot_order() {
         let (hashes, rows) = run(options, steps);
         assert_eq!(hashes, expected, "{label}");
         assert!(rows > 0, "the worlds handed no hints: {label}");
+    }
+}
+
+#[test]
+fn sparse_worlds_hand_each_computation_one_copy_of_the_states_and_commit_the_reference_bits() {
+    let steps = 60;
+    let expected = run_scene("sparse-gas", 1000, RunOptions::reference(), steps);
+    assert!(
+        expected.side_by_side > 0,
+        "the reference hands its one array"
+    );
+    let kernel = KernelConfig::new(4).window(8);
+    for options in [
+        RunOptions::virtual_exec(kernel.clone()),
+        RunOptions::virtual_exec(kernel.clone().mode(RollbackMode::World)),
+        RunOptions::threaded(kernel.clone(), 2),
+    ] {
+        let label = format!("{options:?}");
+        let seen = run_scene("sparse-gas", 1000, options, steps);
+        assert_eq!(seen.hashes, expected.hashes, "{label}");
+        assert!(seen.rows > 0, "the worlds handed no hints: {label}");
+        assert!(
+            seen.side_by_side > 0,
+            "no computation read the prepared copy: {label}"
+        );
     }
 }

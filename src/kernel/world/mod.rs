@@ -152,7 +152,7 @@ pub struct World<M: CellModel> {
     /// mostly empty territory would otherwise allocate and zero them afresh).
     advance_scratch: AdvanceScratch<M::State, M::Event>,
     /// The hints and cells at rest of the step being advanced (`advance`, `compute`).
-    prepared: prepared::Prepared,
+    prepared: prepared::Prepared<M::State>,
     /// Its part of the run trace, when recording.
     record: Option<WorldTrace>,
     /// The step the world started from (0, or its last reterritory): ghosts of this step

@@ -1,28 +1,37 @@
 //! What a world computes once about the states of a step it advances from, before its cells'
 //! computations read them: the model's hints ([`CellModel::hint`]), handed to each
 //! computation row by row ([`Neighbourhood::hints`]) as the reference executor hands them,
-//! and which cells hold only entities at rest ([`CellModel::at_rest`]), so that a cell
-//! whose whole neighbourhood is at rest keeps its state without being computed (SPEC.md
-//! §4.1 rule 7, §K3). Without hints a model recomputes what it needs of each neighbour in
-//! each of the up to 27 computations that read it. Neither changes an output: a
-//! computation without them (a re-execution, conservative mode) commits the same bits.
+//! which cells hold only entities at rest ([`CellModel::at_rest`]), so that a cell whose
+//! whole neighbourhood is at rest keeps its state without being computed (SPEC.md §4.1
+//! rule 7, §K3), and a copy of the states themselves in one array, so that a computation
+//! reads its 27 cells as consecutive slices of it (a row's three cells side by side, as the
+//! reference executor's one array holds them) instead of from 27 allocations scattered in
+//! memory. Without hints a model recomputes what it needs of each neighbour in each of the
+//! up to 27 computations that read it. None of this changes an output: a computation
+//! without it (a re-execution, conservative mode) reads the same states and commits the
+//! same bits.
 
 use super::index::{MarginCell, OwnCell};
 use super::log::Slot;
 use super::territory::{Nb, NbKind};
+use crate::grid::CellCoord;
 use crate::model::{CellModel, Hint, Neighbourhood, Step};
 
 /// The prepared facts about one step's states of a world's own and margin cells, laid out
 /// in ascending global cell order: the cells of one neighbourhood row (consecutive along
 /// x, so consecutive in the grid's order, and all own or margin cells) are then
 /// consecutive, and so are their hints.
-#[derive(Debug, Default)]
-pub(super) struct Prepared {
+#[derive(Debug)]
+pub(super) struct Prepared<S> {
     /// The step whose states they describe (`None`: nothing held).
     step: Option<Step>,
     /// The hints of every entity, cell after cell in ascending global order; empty if the
     /// model gives none (or they are not worth computing this step).
     hints: Vec<Hint>,
+    /// A copy of every entity's state, cell after cell in ascending global order (the
+    /// order of `hints`); empty when not worth copying this step (as the hints, when most
+    /// entities keep their states).
+    states: Vec<S>,
     /// Per own cell, its facts.
     own: Vec<CellFacts>,
     /// Per margin cell, its facts.
@@ -31,11 +40,31 @@ pub(super) struct Prepared {
     own_keeps: Vec<bool>,
 }
 
+impl<S> Default for Prepared<S> {
+    fn default() -> Self {
+        Prepared {
+            step: None,
+            hints: Vec::new(),
+            states: Vec::new(),
+            own: Vec::new(),
+            margin: Vec::new(),
+            own_keeps: Vec::new(),
+        }
+    }
+}
+
+/// The most entities per computed cell, on average, for which [`Prepared`] copies the
+/// states of a step into one array.
+const SPARSE_ENTITIES_PER_CELL: usize = 2;
+
 /// What is prepared about one own or margin cell.
 #[derive(Clone, Copy, Debug)]
 struct CellFacts {
-    /// Where its entities' hints start in [`Prepared::hints`].
+    /// Where its entities' hints and states start in [`Prepared::hints`] and
+    /// [`Prepared::states`].
     start: u32,
+    /// How many entities it holds.
+    len: u32,
     /// Whether every entity it holds is at rest (an empty cell is).
     rest: bool,
 }
@@ -58,16 +87,17 @@ fn in_global_order<'a>(cells: &'a [u32], margin: &'a [u32]) -> impl Iterator<Ite
     })
 }
 
-impl Prepared {
+impl<S: Clone> Prepared<S> {
     /// Prepares the states of step `step` held in `slot`: `cells` are the world's own
     /// cells and `margin` its margin cells (global indices, each ascending), `nbrs` each
-    /// own cell's neighbourhood. Hints are computed when most entities of the own cells are
-    /// in cells to compute (each is read by every computed neighbourhood that holds it),
-    /// not for a territory mostly at rest, as the reference decides.
-    pub(super) fn prepare<M: CellModel>(
+    /// own cell's neighbourhood. Hints and the copy of the states are made when most
+    /// entities of the own cells are in cells to compute (each is read by every computed
+    /// neighbourhood that holds it), not for a territory mostly at rest, as the reference
+    /// decides for its hints.
+    pub(super) fn prepare<M: CellModel<State = S>>(
         &mut self,
         model: &M,
-        slot: &Slot<M::State, M::Event>,
+        slot: &Slot<S, M::Event>,
         cells: &[u32],
         margin: &[u32],
         nbrs: &[[Nb; 27]],
@@ -76,6 +106,7 @@ impl Prepared {
         debug_assert!(cells.is_sorted() && margin.is_sorted());
         self.step = Some(step);
         self.hints.clear();
+        self.states.clear();
         self.own.clear();
         self.margin.clear();
         self.own_keeps.clear();
@@ -85,6 +116,7 @@ impl Prepared {
             let states = slot.neighbour(n);
             let facts = CellFacts {
                 start: total,
+                len: states.len() as u32,
                 rest: states.iter().all(|s| model.at_rest(s)),
             };
             match n.kind() {
@@ -93,29 +125,49 @@ impl Prepared {
             }
             total += states.len() as u32;
         }
-        let (mut own_entities, mut computed) = (0, 0);
+        let (mut own_entities, mut computed, mut computed_cells) = (0, 0, 0);
         for (x, n) in nbrs.iter().enumerate() {
-            let len = slot.state(OwnCell::from_local(x as u32)).len();
+            let len = self.own[x].len as usize;
             own_entities += len;
-            // An empty cell is not computed anyway.
-            let keeps = len > 0 && n.iter().all(|&k| self.facts(k).is_none_or(|f| f.rest));
+            // An empty cell is not computed anyway. Its own facts first: in a scene in
+            // motion they decide at once, where its neighbours (many of them empty, so at
+            // rest) would be read one by one until a moving one is met.
+            let keeps = len > 0
+                && self.own[x].rest
+                && n.iter().all(|&k| self.facts(k).is_none_or(|f| f.rest));
             self.own_keeps.push(keeps);
             if !keeps {
                 computed += len;
+                computed_cells += usize::from(len > 0);
             }
         }
         if computed == 0 || computed * 2 < own_entities {
             return;
         }
+        // The copy pays where cells hold few entities each (a sparse scene: the 27 cells a
+        // computation reads are mostly a load each); in fuller cells the physics of their
+        // entities outweighs the loads, and copying them all costs more than it saves.
+        let copy = computed <= SPARSE_ENTITIES_PER_CELL * computed_cells;
         self.hints.reserve(total as usize);
+        if copy {
+            self.states.reserve(total as usize);
+        }
+        let mut hinted = true;
         for n in in_global_order(cells, margin) {
-            for s in slot.neighbour(n) {
-                match model.hint(s) {
-                    Some(h) => self.hints.push(h),
-                    None => {
-                        // A model gives hints for all its states or for none.
-                        self.hints.clear();
-                        return;
+            let states = slot.neighbour(n);
+            if copy {
+                self.states.extend_from_slice(states);
+            }
+            if hinted {
+                for s in states {
+                    match model.hint(s) {
+                        Some(h) => self.hints.push(h),
+                        None => {
+                            // A model gives hints for all its states or for none.
+                            self.hints.clear();
+                            hinted = false;
+                            break;
+                        }
                     }
                 }
             }
@@ -147,14 +199,29 @@ impl Prepared {
         }
     }
 
-    /// Gives `nb` (the neighbourhood `nbrs` resolves at step `step`) the hints of its
-    /// entities, if those of `step` are held (in place: a neighbourhood is some 600 bytes).
-    pub(super) fn attach<'a, S>(
-        &'a self,
-        nb: &mut Neighbourhood<'a, S>,
+    /// The neighbourhood of `centre` (its cells `nbrs`) at step `step`, read from the copy
+    /// of the states and with the hints, if the copy of `step` is held.
+    pub(super) fn neighbourhood(
+        &self,
+        centre: CellCoord,
         nbrs: &[Nb; 27],
         step: Step,
-    ) {
+    ) -> Option<Neighbourhood<'_, S>> {
+        if self.step != Some(step) || self.states.is_empty() {
+            return None;
+        }
+        let cells = std::array::from_fn(|k| match self.facts(nbrs[k]) {
+            Some(f) => &self.states[f.start as usize..(f.start + f.len) as usize],
+            None => &[][..],
+        });
+        let mut nb = Neighbourhood::new(centre, cells);
+        self.attach(&mut nb, nbrs, step);
+        Some(nb)
+    }
+
+    /// Gives `nb` (the neighbourhood `nbrs` resolves at step `step`) the hints of its
+    /// entities, if those of `step` are held (in place: a neighbourhood is some 600 bytes).
+    pub(super) fn attach<'a>(&'a self, nb: &mut Neighbourhood<'a, S>, nbrs: &[Nb; 27], step: Step) {
         if self.step != Some(step) || self.hints.is_empty() {
             return;
         }

@@ -58,9 +58,18 @@ impl<M: CellModel> World<M> {
         let slot = &self.slots[self.si(s)];
         let c = grid.coord(cell as usize);
         let nbrs = &self.nbrs[x];
-        let cells: [&[M::State]; 27] = std::array::from_fn(|k| slot.neighbour(nbrs[k]));
-        let mut nb = Neighbourhood::new(c, cells);
-        self.prepared.attach(&mut nb, nbrs, s);
+        // From the prepared copy of the step's states if there is one (consecutive slices,
+        // the same states), else from the log and the views.
+        let nb = self.prepared.neighbourhood(c, nbrs, s).unwrap_or_else(|| {
+            let cells: [&[M::State]; 27] = std::array::from_fn(|k| slot.neighbour(nbrs[k]));
+            let mut nb = Neighbourhood::new(c, cells);
+            self.prepared.attach(&mut nb, nbrs, s);
+            nb
+        });
+        debug_assert!(
+            (0..27).all(|k| nb.cells[k] == slot.neighbour(nbrs[k])),
+            "the prepared copy holds the step's states"
+        );
         let mut events = Vec::new();
         self.scratch.clear();
         self.model
