@@ -191,6 +191,7 @@ impl<S: Clone> Prepared<S> {
     }
 
     /// The facts of neighbour `n` (`None` outside the grid).
+    #[inline]
     fn facts(&self, n: Nb) -> Option<&CellFacts> {
         match n.kind() {
             NbKind::Outside => None,
@@ -200,7 +201,8 @@ impl<S: Clone> Prepared<S> {
     }
 
     /// The neighbourhood of `centre` (its cells `nbrs`) at step `step`, read from the copy
-    /// of the states and with the hints, if the copy of `step` is held.
+    /// of the states and with the hints, if the copy of `step` is held. A row's cells are
+    /// consecutive in the copy, so are their hints: one pass over the 27 cells gives both.
     pub(super) fn neighbourhood(
         &self,
         centre: CellCoord,
@@ -210,12 +212,22 @@ impl<S: Clone> Prepared<S> {
         if self.step != Some(step) || self.states.is_empty() {
             return None;
         }
-        let cells = std::array::from_fn(|k| match self.facts(nbrs[k]) {
-            Some(f) => &self.states[f.start as usize..(f.start + f.len) as usize],
-            None => &[][..],
-        });
-        let mut nb = Neighbourhood::new(centre, cells);
-        self.attach(&mut nb, nbrs, step);
+        let mut nb = Neighbourhood::new(centre, [&[][..]; 27]);
+        let hinted = !self.hints.is_empty();
+        for (r, row) in nbrs.chunks_exact(3).enumerate() {
+            let (mut first, mut len) = (None, 0usize);
+            for (j, &n) in row.iter().enumerate() {
+                if let Some(f) = self.facts(n) {
+                    let start = f.start as usize;
+                    nb.cells[3 * r + j] = &self.states[start..start + f.len as usize];
+                    first.get_or_insert(start);
+                    len += f.len as usize;
+                }
+            }
+            if let (true, Some(start), true) = (hinted, first, len > 0) {
+                nb.hints[r] = &self.hints[start..start + len];
+            }
+        }
         Some(nb)
     }
 
