@@ -151,7 +151,8 @@ pub struct World<M: CellModel> {
     /// Scratch for `advance`: its per-cell tables, kept between steps (a step of a large,
     /// mostly empty territory would otherwise allocate and zero them afresh).
     advance_scratch: AdvanceScratch<M::State, M::Event>,
-    /// The hints and cells at rest of the step being advanced (`advance`, `compute`).
+    /// The hints, cells at rest and (in a sparse territory) copy of the states of the step
+    /// being advanced (`advance`, `compute`).
     prepared: prepared::Prepared<M::State>,
     /// Its part of the run trace, when recording.
     record: Option<WorldTrace>,

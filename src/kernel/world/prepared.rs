@@ -20,7 +20,7 @@ use crate::model::{CellModel, Hint, Neighbourhood, Step};
 /// The prepared facts about one step's states of a world's own and margin cells, laid out
 /// in ascending global cell order: the cells of one neighbourhood row (consecutive along
 /// x, so consecutive in the grid's order, and all own or margin cells) are then
-/// consecutive, and so are their hints.
+/// consecutive, and so are their hints and their states in the copy.
 #[derive(Debug)]
 pub(super) struct Prepared<S> {
     /// The step whose states they describe (`None`: nothing held).
@@ -29,8 +29,9 @@ pub(super) struct Prepared<S> {
     /// model gives none (or they are not worth computing this step).
     hints: Vec<Hint>,
     /// A copy of every entity's state, cell after cell in ascending global order (the
-    /// order of `hints`); empty when not worth copying this step (as the hints, when most
-    /// entities keep their states).
+    /// order of `hints`); empty (and its memory given back) when not worth copying this
+    /// step: when most entities keep their states, or the cells to compute hold more than
+    /// [`SPARSE_ENTITIES_PER_CELL`] entities each on average.
     states: Vec<S>,
     /// Per own cell, its facts.
     own: Vec<CellFacts>,
@@ -90,10 +91,11 @@ fn in_global_order<'a>(cells: &'a [u32], margin: &'a [u32]) -> impl Iterator<Ite
 impl<S: Clone> Prepared<S> {
     /// Prepares the states of step `step` held in `slot`: `cells` are the world's own
     /// cells and `margin` its margin cells (global indices, each ascending), `nbrs` each
-    /// own cell's neighbourhood. Hints and the copy of the states are made when most
-    /// entities of the own cells are in cells to compute (each is read by every computed
-    /// neighbourhood that holds it), not for a territory mostly at rest, as the reference
-    /// decides for its hints.
+    /// own cell's neighbourhood. Hints are computed when most entities of the own cells are
+    /// in cells to compute (each is read by every computed neighbourhood that holds it),
+    /// not for a territory mostly at rest, as the reference decides; the states are copied
+    /// under the same condition if, besides, the cells to compute hold at most
+    /// [`SPARSE_ENTITIES_PER_CELL`] entities each on average (a sparse scene).
     pub(super) fn prepare<M: CellModel<State = S>>(
         &mut self,
         model: &M,
@@ -141,19 +143,27 @@ impl<S: Clone> Prepared<S> {
                 computed_cells += usize::from(len > 0);
             }
         }
-        if computed == 0 || computed * 2 < own_entities {
-            return;
-        }
+        let worth = computed > 0 && computed * 2 >= own_entities;
         // The copy pays where cells hold few entities each (a sparse scene: the 27 cells a
         // computation reads are mostly a load each); in fuller cells the physics of their
         // entities outweighs the loads, and copying them all costs more than it saves.
-        let copy = computed <= SPARSE_ENTITIES_PER_CELL * computed_cells;
+        let copy = worth && computed <= SPARSE_ENTITIES_PER_CELL * computed_cells;
+        if !copy {
+            // Scratch of one step: not held through a run's dense or resting phases.
+            self.states = Vec::new();
+        }
+        if !worth {
+            return;
+        }
         self.hints.reserve(total as usize);
         if copy {
             self.states.reserve(total as usize);
         }
         let mut hinted = true;
         for n in in_global_order(cells, margin) {
+            if !copy && !hinted {
+                break;
+            }
             let states = slot.neighbour(n);
             if copy {
                 self.states.extend_from_slice(states);
@@ -200,68 +210,63 @@ impl<S: Clone> Prepared<S> {
         }
     }
 
-    /// The neighbourhood of `centre` (its cells `nbrs`) at step `step`, read from the copy
-    /// of the states and with the hints, if the copy of `step` is held. A row's cells are
-    /// consecutive in the copy, so are their hints: one pass over the 27 cells gives both.
-    pub(super) fn neighbourhood(
-        &self,
+    /// The neighbourhood of `centre` (its cells `nbrs`) at step `step`, whose states `slot`
+    /// holds: its cells taken from the copy if the copy of `step` is held (then `true`
+    /// comes with it), else from `slot`; its rows' hints if those of `step` are held.
+    pub(super) fn neighbourhood<'a, E: Clone>(
+        &'a self,
+        slot: &'a Slot<S, E>,
         centre: CellCoord,
         nbrs: &[Nb; 27],
         step: Step,
-    ) -> Option<Neighbourhood<'_, S>> {
-        if self.step != Some(step) || self.states.is_empty() {
-            return None;
+    ) -> (Neighbourhood<'a, S>, bool) {
+        let held = self.step == Some(step);
+        let from_copy = held && !self.states.is_empty();
+        let hinted = held && !self.hints.is_empty();
+        let mut nb = if from_copy {
+            Neighbourhood::new(centre, [&[][..]; 27])
+        } else {
+            Neighbourhood::new(centre, std::array::from_fn(|k| slot.neighbour(nbrs[k])))
+        };
+        if from_copy || hinted {
+            self.fill_rows(&mut nb, nbrs, from_copy, hinted);
         }
-        let mut nb = Neighbourhood::new(centre, [&[][..]; 27]);
-        let hinted = !self.hints.is_empty();
+        (nb, from_copy)
+    }
+
+    /// Gives `nb` (the neighbourhood `nbrs` resolves at the prepared step) its cells from
+    /// the copy (`from_copy`) and its rows' hints (`hinted`), in one pass over the 27
+    /// cells' facts: a row's cells are consecutive in the global order, so are their
+    /// states in the copy and their hints (the row's first cell inside the grid starts
+    /// them, its cells' entities count them).
+    fn fill_rows<'a>(
+        &'a self,
+        nb: &mut Neighbourhood<'a, S>,
+        nbrs: &[Nb; 27],
+        from_copy: bool,
+        hinted: bool,
+    ) {
         for (r, row) in nbrs.chunks_exact(3).enumerate() {
             let (mut first, mut len) = (None, 0usize);
             for (j, &n) in row.iter().enumerate() {
                 if let Some(f) = self.facts(n) {
                     let start = f.start as usize;
-                    nb.cells[3 * r + j] = &self.states[start..start + f.len as usize];
+                    debug_assert!(
+                        first.is_none_or(|s| s + len == start),
+                        "a row is contiguous"
+                    );
+                    if from_copy {
+                        nb.cells[3 * r + j] = &self.states[start..start + f.len as usize];
+                    }
                     first.get_or_insert(start);
                     len += f.len as usize;
                 }
             }
-            if let (true, Some(start), true) = (hinted, first, len > 0) {
-                nb.hints[r] = &self.hints[start..start + len];
+            if hinted && len > 0 {
+                if let Some(start) = first {
+                    nb.hints[r] = &self.hints[start..start + len];
+                }
             }
-        }
-        Some(nb)
-    }
-
-    /// Gives `nb` (the neighbourhood `nbrs` resolves at step `step`) the hints of its
-    /// entities, if those of `step` are held (in place: a neighbourhood is some 600 bytes).
-    pub(super) fn attach<'a>(&'a self, nb: &mut Neighbourhood<'a, S>, nbrs: &[Nb; 27], step: Step) {
-        if self.step != Some(step) || self.hints.is_empty() {
-            return;
-        }
-        for (r, row) in nbrs.chunks_exact(3).enumerate() {
-            // A row's cells are consecutive in the global order, so are their hints: the
-            // row's first cell inside the grid starts them, the row's entities count them.
-            let len: usize = nb.cells[3 * r..3 * r + 3].iter().map(|c| c.len()).sum();
-            if len == 0 {
-                continue;
-            }
-            let Some(first) = row.iter().find_map(|&n| self.facts(n)) else {
-                continue;
-            };
-            debug_assert!(
-                {
-                    let mut end = first.start as usize;
-                    row.iter().zip(&nb.cells[3 * r..3 * r + 3]).all(|(&n, c)| {
-                        self.facts(n).is_none_or(|f| {
-                            let contiguous = f.start as usize == end;
-                            end += c.len();
-                            contiguous
-                        })
-                    })
-                },
-                "a row is contiguous"
-            );
-            let start = first.start as usize;
-            nb.hints[r] = &self.hints[start..start + len];
         }
     }
 }
