@@ -69,6 +69,7 @@
 //!   rigid-body cell model;
 //! - [`model`], [`state`], [`hash`], [`frame`]: the seam between a kernel and a cell model,
 //!   the per-cell state of the whole domain, the canonical state hash, committed frames;
+//!   [`text`]: counts written for people;
 //!   [`models`]: example models built on that seam only;
 //! - [`kernel`]: the pure, single-threaded Time Warp protocol (worlds, messages, GVT,
 //!   balancing);
@@ -101,6 +102,7 @@ pub mod scaling;
 pub mod scene;
 pub mod sim;
 pub mod state;
+pub mod text;
 pub mod verify;
 
 /// The generic path in one import: implement [`CellModel`], run it with [`Runner`] on any

@@ -6,6 +6,7 @@ use crate::exec::error::{ContractViolation, ExecError};
 use crate::kernel::{Counters, RollbackMode};
 use crate::model::Step;
 use crate::sim::ExecutorKind;
+use crate::text::counted;
 use std::fmt;
 
 /// One checked run: its configuration, counters, replay schedule and outcome.
@@ -105,16 +106,10 @@ impl fmt::Display for RunCheck {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match &self.outcome {
             RunOutcome::Matched => {
-                let steps = match self.steps_matched {
-                    1 => "1 step matches".to_string(),
-                    n => format!("{n} steps match"),
-                };
+                let steps = counted(self.steps_matched, "step matches", "steps match");
                 write!(f, "ok       {}: {steps}", self.name())?;
                 if let Some(c) = &self.counters {
-                    let rollbacks = match c.total.rollbacks() {
-                        1 => "1 rollback".to_string(),
-                        n => format!("{n} rollbacks"),
-                    };
+                    let rollbacks = counted(c.total.rollbacks(), "rollback", "rollbacks");
                     write!(f, ", {rollbacks}, efficiency {:.3}", c.total.efficiency())?;
                 }
                 Ok(())
