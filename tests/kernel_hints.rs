@@ -134,6 +134,25 @@ fn run_scene(name: &str, objects: usize, options: RunOptions, steps: u64) -> See
     }
 }
 
+/// The kernel executors each test runs with `kernel`: the virtual executor with blocks and
+/// a random partition in cell mode and with blocks in world mode, the threaded executor
+/// with blocks and k-means (it computes a postponed world's interior ahead, and the advance
+/// then prepares its border again or computes it from the log).
+fn kernel_executors(kernel: &KernelConfig) -> [RunOptions; 5] {
+    [
+        RunOptions::virtual_exec(kernel.clone()),
+        RunOptions::virtual_exec(
+            kernel
+                .clone()
+                .partition(PartitionKind::Random)
+                .partition_seed(3),
+        ),
+        RunOptions::virtual_exec(kernel.clone().mode(RollbackMode::World)),
+        RunOptions::threaded(kernel.clone(), 2),
+        RunOptions::threaded(kernel.clone().partition(PartitionKind::KMeans), 2),
+    ]
+}
+
 /// Every committed hash of `options` on 400 falling cubes (the landing, then rest), and the
 /// number of hint rows the model checked.
 fn run(options: RunOptions, steps: u64) -> (Vec<u64>, u64) {
@@ -146,18 +165,7 @@ fn worlds_hand_each_computation_its_neighbourhoods_hints_in_slot_order() {
     let steps = 150;
     let (expected, reference_rows) = run(RunOptions::reference(), steps);
     assert!(reference_rows > 0, "the reference hands hints");
-    let kernel = KernelConfig::new(5).window(8);
-    for options in [
-        RunOptions::virtual_exec(kernel.clone()),
-        RunOptions::virtual_exec(
-            kernel
-                .clone()
-                .partition(PartitionKind::Random)
-                .partition_seed(3),
-        ),
-        RunOptions::virtual_exec(kernel.clone().mode(RollbackMode::World)),
-        RunOptions::threaded(kernel.clone().partition(PartitionKind::KMeans), 2),
-    ] {
+    for options in kernel_executors(&KernelConfig::new(5).window(8)) {
         let label = format!("{options:?}");
         let (hashes, rows) = run(options, steps);
         assert_eq!(hashes, expected, "{label}");
@@ -173,21 +181,7 @@ fn sparse_worlds_read_the_prepared_copy_and_commit_the_reference_bits() {
         expected.side_by_side > 0,
         "the reference hands its one array"
     );
-    let kernel = KernelConfig::new(4).window(8);
-    for options in [
-        RunOptions::virtual_exec(kernel.clone()),
-        RunOptions::virtual_exec(
-            kernel
-                .clone()
-                .mode(RollbackMode::World)
-                .partition(PartitionKind::Random)
-                .partition_seed(5),
-        ),
-        // The threaded executor computes a postponed world's interior ahead, and the
-        // advance then prepares its border again or computes it from the log.
-        RunOptions::threaded(kernel.clone(), 2),
-        RunOptions::threaded(kernel.clone().partition(PartitionKind::KMeans), 2),
-    ] {
+    for options in kernel_executors(&KernelConfig::new(4).window(8)) {
         let label = format!("{options:?}");
         let seen = run_scene("sparse-gas", 1000, options, steps);
         assert_eq!(seen.hashes, expected.hashes, "{label}");

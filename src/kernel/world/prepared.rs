@@ -262,10 +262,9 @@ impl<S: Clone> Prepared<S> {
                     len += f.len as usize;
                 }
             }
-            if hinted && len > 0 {
-                if let Some(start) = first {
-                    nb.hints[r] = &self.hints[start..start + len];
-                }
+            // (An empty row's hints are an empty slice either way.)
+            if let (true, Some(start)) = (hinted, first) {
+                nb.hints[r] = &self.hints[start..start + len];
             }
         }
     }
