@@ -56,6 +56,13 @@ pub trait Facade: Send + Sync + 'static {
     /// implementation may back off (`u32::MAX`: a poller nobody waits for, which may sleep
     /// longest; [`SOON_POLL_SPINS`]: one that others will wait for soon).
     fn pause(spins: u32);
+    /// Gives the processor away for about `d` when nobody waits for the caller: the
+    /// output stage's slow poll once it knows steps take longer than [`SLOW_POLL`].
+    /// Without a clock of its own an implementation pauses as for `spins == u32::MAX`.
+    fn pause_for(d: std::time::Duration) {
+        let _ = d;
+        Self::pause(u32::MAX);
+    }
 }
 
 /// The standard library's primitives.
@@ -120,11 +127,20 @@ impl Facade for StdFacade {
             _ => std::thread::sleep(std::time::Duration::from_micros(50)),
         }
     }
+
+    fn pause_for(d: std::time::Duration) {
+        std::thread::sleep(d);
+    }
 }
 
 /// How long [`StdFacade`] sleeps for `spins == u32::MAX`: the pace of a poller nobody
 /// waits for (the threaded executor's output stage between frames).
 pub const SLOW_POLL: std::time::Duration = std::time::Duration::from_millis(2);
+
+/// The longest the threaded executor's output stage sleeps between polls: when a step
+/// takes longer than [`SLOW_POLL`] it polls once per step's time, up to this (a frame then
+/// reaches the sink at most this late, and a stop request is seen this soon).
+pub const LONGEST_POLL: std::time::Duration = std::time::Duration::from_millis(16);
 
 /// The `spins` of a poller that others will wait for soon, but not yet: [`StdFacade`]
 /// sleeps a quarter of [`SLOW_POLL`].

@@ -13,7 +13,9 @@ use crate::exec::error::ExecError;
 use crate::exec::live::{LiveStatus, WorldStatus};
 use crate::exec::load::LoadMeter;
 use crate::exec::schedule::Schedule;
-use crate::exec::sync::{Facade, FacadeAtomic, FacadeMutex, SLOW_POLL, SOON_POLL_SPINS};
+use crate::exec::sync::{
+    Facade, FacadeAtomic, FacadeMutex, LONGEST_POLL, SLOW_POLL, SOON_POLL_SPINS,
+};
 use crate::frame::Frame;
 use crate::kernel::balance::{imbalance, Balancer};
 use crate::kernel::counters::Counters;
@@ -23,14 +25,7 @@ use crate::model::{CellModel, Step};
 use crossbeam_deque::Injector;
 use std::collections::{BTreeMap, VecDeque};
 use std::sync::Arc;
-use std::time::Instant;
-
-/// The `spins` the output stage passes to [`Facade::pause`] while nobody waits for it: it
-/// polls at a slow pace ([`SLOW_POLL`] with [`StdFacade`](crate::exec::sync::StdFacade)). Each poll
-/// wakes the calling thread, which on a machine with a core per worker takes a worker's core
-/// for a moment: at 0.5 ms that was a third of the threaded run's context switches on
-/// 8,000 cubes (docs/performance.md, "Round nine").
-const OUTPUT_PAUSE: u32 = u32::MAX;
+use std::time::{Duration, Instant};
 
 /// The `spins` the output stage passes to [`Facade::pause`] while the workers will wait
 /// for it within two slow polls but not within half of one ([`SOON_POLL_SPINS`]: a
@@ -316,7 +311,10 @@ pub fn run_threaded_controlled<M: CellModel + 'static, F: Facade>(
 }
 
 /// How fast steps are committed, as the output stage sees it: how many one slow poll
-/// ([`SLOW_POLL`]) lets through, so it polls fast early enough when steps are quick.
+/// ([`SLOW_POLL`]) lets through, so it polls fast early enough when steps are quick, and how
+/// long one step takes, so it polls no more than about once a step when steps are slow (a
+/// poll wakes a thread that takes a worker's core for a moment: at 27,000 cubes a step
+/// takes ~50 ms, and polling every 2 ms was ~500 context switches a second).
 struct Pace {
     /// When it last measured.
     at: Instant,
@@ -325,6 +323,9 @@ struct Pace {
     /// Steps committed per slow poll, at the last measurement ([`Step::MAX`] before one:
     /// until the pace is known the output stage polls fast).
     per_poll: Step,
+    /// How long a step took at the last measurement (at least the time measured when no
+    /// step was committed in it; [`SLOW_POLL`] before one).
+    per_step: Duration,
 }
 
 impl Pace {
@@ -333,6 +334,7 @@ impl Pace {
             at: Instant::now(),
             committed,
             per_poll: Step::MAX,
+            per_step: SLOW_POLL,
         }
     }
 
@@ -342,10 +344,20 @@ impl Pace {
         if elapsed < SLOW_POLL {
             return;
         }
-        let steps = committed.saturating_sub(self.committed) as f64;
-        self.per_poll = (steps * SLOW_POLL.as_secs_f64() / elapsed.as_secs_f64()).ceil() as Step;
+        let steps = committed.saturating_sub(self.committed);
+        self.per_poll =
+            (steps as f64 * SLOW_POLL.as_secs_f64() / elapsed.as_secs_f64()).ceil() as Step;
+        self.per_step = elapsed / u32::try_from(steps.max(1)).unwrap_or(u32::MAX);
         self.at = Instant::now();
         self.committed = committed;
+    }
+
+    /// The slow poll's sleep: a step's time, within [`SLOW_POLL`]..=[`LONGEST_POLL`]. Used
+    /// only while more than two slow polls' steps are left before anyone waits for the
+    /// output stage, so at least three steps: the workers cannot reach the point where they
+    /// wait for it within one step's time.
+    fn slow_sleep(&self) -> Duration {
+        self.per_step.clamp(SLOW_POLL, LONGEST_POLL)
     }
 }
 
@@ -374,13 +386,14 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
         if batch.is_empty() {
             pace.observe(shared.committed.load());
             let left = shared.steps_before_output_is_awaited();
-            F::pause(if left <= AWAITED_STEPS || left <= pace.per_poll / 2 {
-                OUTPUT_PAUSE_URGENT
+            if left <= AWAITED_STEPS || left <= pace.per_poll / 2 {
+                F::pause(OUTPUT_PAUSE_URGENT);
             } else if left <= pace.per_poll.saturating_mul(2) {
-                OUTPUT_PAUSE_SOON
+                F::pause(OUTPUT_PAUSE_SOON);
             } else {
-                OUTPUT_PAUSE
-            });
+                // Nobody waits for it: the slow poll, at the steps' pace (`Pace`).
+                F::pause_for(pace.slow_sleep());
+            }
         } else {
             deliver(batch);
         }
@@ -405,4 +418,38 @@ fn run_epoch<M: CellModel + 'static, F: Facade>(
         return Err(ExecError::Thread(e));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pace whose last measurement was `ago` before now, at step 0.
+    fn measured_since(ago: Duration) -> Pace {
+        let mut p = Pace::new(0);
+        p.at = Instant::now() - ago;
+        p
+    }
+
+    #[test]
+    fn the_slow_poll_sleeps_a_steps_time_between_two_and_sixteen_milliseconds() {
+        // Before any measurement: the 2 ms slow poll.
+        assert_eq!(Pace::new(0).slow_sleep(), SLOW_POLL);
+        // Slow steps (~50 ms each): one poll per 16 ms at most.
+        let mut slow = measured_since(Duration::from_millis(100));
+        slow.observe(2);
+        assert_eq!(slow.per_poll, 1);
+        assert_eq!(slow.slow_sleep(), LONGEST_POLL);
+        // No step at all in the time measured: as slow as that time, at least.
+        let mut stuck = measured_since(Duration::from_millis(5));
+        stuck.observe(0);
+        assert!(stuck.per_step >= Duration::from_millis(5));
+        assert!(stuck.slow_sleep() >= Duration::from_millis(5));
+        assert!(stuck.slow_sleep() <= LONGEST_POLL);
+        // Quick steps (1,000 in 100 ms): never faster than the slow poll.
+        let mut quick = measured_since(Duration::from_millis(100));
+        quick.observe(1_000);
+        assert!(quick.per_poll >= 10);
+        assert_eq!(quick.slow_sleep(), SLOW_POLL);
+    }
 }
