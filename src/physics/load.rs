@@ -23,6 +23,10 @@ const LOAD_SWEEPS: u32 = 24;
 /// The sweeps stop once no row's velocity changed by more than this, m/s.
 const LOAD_TOLERANCE: f32 = 1e-6;
 
+/// Sweeps of each one-body solve that starts the joint solve
+/// (`start_from_shock_propagation`).
+const START_SWEEPS: u32 = 8;
+
 /// Slip speeds at or below this are left alone (no direction can be taken from them), m/s.
 const SLIP_EPSILON: f32 = 1e-9;
 
@@ -185,6 +189,134 @@ fn immovable_rows(rows: &mut Vec<Row>, index: usize, body: &Body, set: &ContactS
     }
 }
 
+/// Whether a row's movable partner takes its share of the row's impulses.
+#[derive(Clone, Copy, PartialEq)]
+enum Partner {
+    /// Both bodies move (the joint solve).
+    Moves,
+    /// The partner is held at its current velocity (shock propagation's view).
+    Held,
+}
+
+/// One Gauss–Seidel sweep over `rows` (normal impulse, then Coulomb friction, per row):
+/// every row may close by its gap within the step and must not approach beyond it.
+/// Returns the largest velocity change a row made, m/s.
+fn sweep(rows: &mut [Row], bodies: &mut [Motion], dt: f32, partner: Partner) -> f32 {
+    let mut largest_change = 0.0f32;
+    let held = partner == Partner::Held;
+    let mass_along = |row: &Row, bodies: &[Motion], d: &Vec3| {
+        if held {
+            bodies[row.a].inv_mass_along(&row.ra, d)
+        } else {
+            inv_mass_along(row, bodies, d)
+        }
+    };
+    let apply = |row: &Row, bodies: &mut [Motion], impulse: &Vec3| {
+        if held {
+            bodies[row.a].apply(&row.ra, impulse);
+        } else {
+            push(row, bodies, impulse);
+        }
+    };
+    // Held, the partner is where the upper body's weight goes, not a driver: the part of
+    // its velocity that moves into the row is left to the joint solve, which shares it by
+    // the masses (held, a light body driven under a heavy one would kick it as if it were
+    // infinitely heavy).
+    let relative = |row: &Row, bodies: &[Motion]| {
+        let v = relative_velocity(row, bodies);
+        match row.b {
+            Some(b) if held => {
+                let into = row.normal.dot(&bodies[b].linvel).max(0.0);
+                v + row.normal * into
+            }
+            _ => v,
+        }
+    };
+    for row in rows {
+        let n = row.normal;
+        let vn = n.dot(&relative(row, bodies));
+        let target = -row.gap.max(0.0) / dt;
+        let w = mass_along(row, bodies, &n);
+        let next = (row.normal_impulse + (target - vn) / w).max(0.0);
+        if next != row.normal_impulse {
+            let d = next - row.normal_impulse;
+            apply(row, bodies, &(n * d));
+            row.normal_impulse = next;
+            largest_change = largest_change.max(d.abs() * w);
+        }
+        if row.friction <= 0.0 {
+            continue;
+        }
+        let v = relative(row, bodies);
+        let slip = v - n * n.dot(&v);
+        let speed = slip.norm();
+        let bound = row.friction * row.normal_impulse;
+        let wanted = if speed > SLIP_EPSILON {
+            let t = slip / speed;
+            row.friction_impulse - t * (speed / mass_along(row, bodies, &t))
+        } else {
+            row.friction_impulse
+        };
+        let wanted_len = wanted.norm();
+        let next = if wanted_len > bound && wanted_len > 0.0 {
+            wanted * (bound / wanted_len)
+        } else {
+            wanted
+        };
+        let d = next - row.friction_impulse;
+        if d != Vec3::zeros() {
+            apply(row, bodies, &d);
+            row.friction_impulse = next;
+            let dn = d.norm();
+            largest_change = largest_change.max(dn * mass_along(row, bodies, &(d / dn)));
+        }
+    }
+    largest_change
+}
+
+/// Starts the joint solve where shock propagation ends, then hands the upper bodies'
+/// weight down: the lower body stopped by its holds, each upper body stopped against the
+/// lower one held still, the reaction of those impulses put on the lower body, and the
+/// lower body stopped by its holds again. A system at rest is then at its answer, and the
+/// joint sweeps correct what is left (a lever's tipping, friction). Started from no
+/// impulse, the sweeps approached a body resting on a lighter one at the pace of the mass
+/// ratio: a cube 100 times heavier than the one under it kept 99 % of its fall after each
+/// sweep, and after the last it followed a lower body that its own solve held still, so
+/// its velocity grew while its position was held: energy from nothing.
+fn start_from_shock_propagation(
+    system: &LoadSystem<'_>,
+    rows: &mut [Row],
+    bodies: &mut [Motion],
+    starts: &[usize],
+    dt: f32,
+) {
+    // The lower body's holds are the rows before the first upper body's; each upper
+    // body's rows (its environment's, then the lower body's) end where its manifold does.
+    let holds = rows
+        .iter()
+        .take_while(|r| r.a == 0 && r.b.is_none())
+        .count();
+    for _ in 0..START_SWEEPS {
+        sweep(&mut rows[..holds], bodies, dt, Partner::Moves);
+    }
+    let mut from = holds;
+    for (u, upper) in system.uppers.iter().enumerate() {
+        let to = starts[u] + upper.manifold.local.len();
+        for _ in 0..START_SWEEPS {
+            sweep(&mut rows[from..to], bodies, dt, Partner::Held);
+        }
+        // The reaction on the lower body.
+        for row in &rows[starts[u]..to] {
+            let on_lower = -(row.normal * row.normal_impulse + row.friction_impulse);
+            bodies[0].apply(&row.rb, &on_lower);
+        }
+        from = to;
+    }
+    for _ in 0..START_SWEEPS {
+        sweep(&mut rows[..holds], bodies, dt, Partner::Moves);
+    }
+}
+
 /// Solves the load system for one step of `dt` under `gravity` (velocities only: every row
 /// may close by its gap within the step and must not approach beyond it; Coulomb friction
 /// within `μ` times the row's normal impulse) and returns what each upper body gives and
@@ -234,54 +366,15 @@ pub(crate) fn solve_load(system: &LoadSystem<'_>, gravity: Vec3, dt: f32) -> Vec
             });
         }
     }
+    start_from_shock_propagation(system, &mut rows, &mut bodies, &starts, dt);
     for _ in 0..LOAD_SWEEPS {
-        let mut largest_change = 0.0f32;
-        for row in &mut rows {
-            let n = row.normal;
-            let vn = n.dot(&relative_velocity(row, &bodies));
-            let target = -row.gap.max(0.0) / dt;
-            let w = inv_mass_along(row, &bodies, &n);
-            let next = (row.normal_impulse + (target - vn) / w).max(0.0);
-            if next != row.normal_impulse {
-                let d = next - row.normal_impulse;
-                push(row, &mut bodies, &(n * d));
-                row.normal_impulse = next;
-                largest_change = largest_change.max(d.abs() * w);
-            }
-            if row.friction <= 0.0 {
-                continue;
-            }
-            let v = relative_velocity(row, &bodies);
-            let slip = v - n * n.dot(&v);
-            let speed = slip.norm();
-            let bound = row.friction * row.normal_impulse;
-            let wanted = if speed > SLIP_EPSILON {
-                let t = slip / speed;
-                row.friction_impulse - t * (speed / inv_mass_along(row, &bodies, &t))
-            } else {
-                row.friction_impulse
-            };
-            let wanted_len = wanted.norm();
-            let next = if wanted_len > bound && wanted_len > 0.0 {
-                wanted * (bound / wanted_len)
-            } else {
-                wanted
-            };
-            let d = next - row.friction_impulse;
-            if d != Vec3::zeros() {
-                push(row, &mut bodies, &d);
-                row.friction_impulse = next;
-                let dn = d.norm();
-                largest_change = largest_change.max(dn * inv_mass_along(row, &bodies, &(d / dn)));
-            }
-        }
-        if largest_change < LOAD_TOLERANCE {
+        if sweep(&mut rows, &mut bodies, dt, Partner::Moves) < LOAD_TOLERANCE {
             break;
         }
     }
     let l = &bodies[0];
     let lower_inv_inertia = l.inv_inertia;
-    system
+    let loads = system
         .uppers
         .iter()
         .enumerate()
@@ -307,5 +400,6 @@ pub(crate) fn solve_load(system: &LoadSystem<'_>, gravity: Vec3, dt: f32) -> Vec
                 point_velocities,
             }
         })
-        .collect()
+        .collect();
+    loads
 }
