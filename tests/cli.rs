@@ -285,6 +285,13 @@ fn bad_scene_files_exit_non_zero_naming_the_file_and_field() {
             "position = [2.0, 1.0, 2.0]\nangular_velocity = [1e22, 0.0, 0.0]\n\n[solver]\nmax_angular_speed = 1e22\n",
             "solver.max_angular_speed` = 1e22 is invalid: must be greater than 0 and at most 1e6 rad/s",
         ),
+        // Two balls at 1e29 m/s made a velocity NaN in their first collision.
+        (
+            "speed.toml",
+            "position = [2.0, 1.0, 2.0]\n",
+            "position = [2.0, 1.0, 2.0]\nvelocity = [1e29, 0.0, 0.0]\n\n[solver]\nmax_speed = 1e30\n",
+            "solver.max_speed` = 1e30 is invalid: must be at most 1e6 m/s",
+        ),
         (
             "static.toml",
             "[domain]",

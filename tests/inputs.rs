@@ -397,3 +397,36 @@ fn a_removal_and_a_spawn_of_one_id_at_one_step_are_refused() {
         assert!(err.contains(expected), "{err}");
     }
 }
+
+/// A script whose only entry sets a spin is held to the body's spin cap as a script with a
+/// push is: the bodies' shapes were gathered only for pushes, so a `set-velocity` alone
+/// went unchecked, and 1e20 rad/s made the orientation NaN in the step (a panic).
+#[test]
+fn a_set_velocity_alone_is_held_to_the_spin_cap() {
+    let scene = SceneBuilder::new([-5.0; 3], [5.0; 3])
+        .body_spec(ball(0, [0.0, 2.0, 0.0], [0.0; 3]))
+        .build()
+        .unwrap();
+    for spin in ["1e20", "1000.0"] {
+        let text = format!(
+            "[[inputs]]\nstep = 5\naction = \"set-velocity\"\nid = 0\nvelocity = [0.0, 0.0, 0.0]\nangular_velocity = [{spin}, 0.0, 0.0]\n"
+        );
+        let script = parse_inputs(&text, SceneFormat::Toml, "spin.toml").unwrap();
+        let err = script
+            .to_inputs(&scene, "spin.toml", 0)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("inputs[0].angular_velocity")
+                && err.contains("angular speed must not exceed"),
+            "{spin}: {err}"
+        );
+    }
+    let ok = parse_inputs(
+        "[[inputs]]\nstep = 5\naction = \"set-velocity\"\nid = 0\nvelocity = [0.0, 0.0, 0.0]\nangular_velocity = [10.0, 0.0, 0.0]\n",
+        SceneFormat::Toml,
+        "spin.toml",
+    )
+    .unwrap();
+    assert!(ok.to_inputs(&scene, "spin.toml", 0).is_ok());
+}

@@ -1,7 +1,7 @@
 //! The command line of [`main_with`]: parsing (clap) and dispatch to [`super::commands`].
 
 use super::commands;
-use super::numbers::{count, count_from, whole};
+use super::numbers::{count, count_from, entity_count, whole};
 use super::registry::{ModelSize, Registry};
 use super::usage::{exit_status, usage};
 use crate::kernel::{KernelConfig, PartitionKind, RollbackMode};
@@ -60,7 +60,7 @@ pub struct ModelArgs {
     #[arg(long, value_name = "NAME")]
     pub model: String,
     /// Entities at step 0 [default: the model's].
-    #[arg(long, value_name = "N", value_parser = count)]
+    #[arg(long, value_name = "N", value_parser = entity_count)]
     pub entities: Option<usize>,
     /// Seed of the initial states and the model's randomness.
     #[arg(long, value_name = "S", default_value_t = 1, value_parser = whole(0, u64::MAX))]

@@ -49,6 +49,17 @@ pub fn count(s: &str) -> Result<usize, String> {
     count_from(0)(s)
 }
 
+/// The most entities a registered model may be asked for (`--entities`): ten times
+/// `--objects`' cap. Unbounded, a billion entities aborted on a 56 GB allocation and
+/// `u64::MAX` divided by zero in the grid.
+pub const MAX_ENTITIES: u64 = 10_000_000;
+
+/// A parser for `--entities`: a whole number from 1 to [`MAX_ENTITIES`].
+pub fn entity_count(s: &str) -> Result<usize, String> {
+    let n = whole(1, MAX_ENTITIES)(s)?;
+    usize::try_from(n).map_err(|_| "too large for this machine".to_string())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -128,13 +128,16 @@ impl InputScript {
         let mut presence = Presence {
             ids: scene.bodies.iter().map(|b| (b.id, (None, None))).collect(),
         };
-        // The bodies a push may name (the scene's and those spawned so far), for its mass.
-        let mut specs: BTreeMap<BodyId, &BodySpec> =
-            if self.inputs.iter().any(|e| e.action == InputAction::Push) {
-                scene.bodies.iter().map(|b| (b.id, b)).collect()
-            } else {
-                BTreeMap::new()
-            };
+        // The bodies a push or a new spin may name (the scene's and those spawned so far),
+        // for the mass and the spin cap.
+        let mut specs: BTreeMap<BodyId, &BodySpec> = if self.inputs.iter().any(|e| {
+            e.action == InputAction::Push
+                || (e.action == InputAction::SetVelocity && e.angular_velocity.is_some())
+        }) {
+            scene.bodies.iter().map(|b| (b.id, b)).collect()
+        } else {
+            BTreeMap::new()
+        };
         let mut out = Vec::with_capacity(order.len());
         let largest = scene.max_radius();
         // Built at the first spawn, for all of them.

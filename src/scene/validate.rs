@@ -13,6 +13,11 @@ pub use crate::physics::MAX_ANGULAR_SPEED_CAP;
 /// velocity and displacement overflow f32 (a pull of 3e38 m/s² left the bodies hovering).
 pub const MAX_GRAVITY: f32 = 1e6;
 
+/// The largest `solver.max_speed` a scene may set, m/s: far below where a step's impulses
+/// and energies overflow f32 (two balls at 1e29 m/s made a velocity NaN in their first
+/// collision, and one at 1e29 m/s was capped to about nothing).
+pub const MAX_SPEED_CAP: f32 = 1e6;
+
 /// Initial overlap tolerated between bodies (and with static geometry), in metres.
 pub const OVERLAP_TOLERANCE: f32 = 1e-3;
 
@@ -204,6 +209,13 @@ pub fn validate(scene: &Scene, origin: &str) -> Result<(), SceneError> {
         "must be between 0 and 10 metres",
     )?;
     c.positive("solver.max_speed", s.max_speed)?;
+    if s.max_speed > MAX_SPEED_CAP {
+        return Err(c.fail(
+            "solver.max_speed",
+            s.max_speed,
+            &format!("must be at most {MAX_SPEED_CAP:e} m/s"),
+        ));
+    }
     // Beyond these the f32 arithmetic of one step overflows: a spin of 1e22 rad/s turned the
     // orientation's update to infinity and the rotation to NaN.
     if !(s.max_angular_speed > 0.0 && s.max_angular_speed <= MAX_ANGULAR_SPEED_CAP) {
