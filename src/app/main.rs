@@ -1,7 +1,7 @@
 //! The command line of [`main_with`]: parsing (clap) and dispatch to [`super::commands`].
 
 use super::commands;
-use super::numbers::{count, count_from, entity_count, whole};
+use super::numbers::{count_from, entity_count, whole};
 use super::registry::{ModelSize, Registry};
 use super::usage::{exit_status, usage};
 use crate::kernel::{KernelConfig, PartitionKind, RollbackMode};
