@@ -1663,3 +1663,39 @@ fn the_mpi_executor_asks_for_a_build_with_the_mpi_feature() {
     assert!(err.contains("--features mpi"), "{err}");
     assert!(err.contains("mpirun"), "{err}");
 }
+
+/// A registered model's run checks its outputs before it runs, as a scene's does: a trace
+/// into a FIFO or a directory, or onto the checkpoint's path, is refused before step 1 and
+/// nothing is written (a trace written over the checkpoint destroyed it, and a FIFO was
+/// replaced by a regular file).
+#[test]
+fn a_model_runs_outputs_are_checked_before_it_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    let sub = at("sub");
+    std::fs::create_dir(&sub).unwrap();
+    let same = at("same.json");
+    let base = [
+        "run",
+        "--model",
+        "epidemic",
+        "--steps",
+        "5",
+        "--executor",
+        "virtual",
+    ];
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["--trace", &sub], "is a directory, not a regular file"),
+        (
+            vec!["--trace", &same, "--checkpoint", &same],
+            "name the same file",
+        ),
+    ];
+    for (extra, expected) in cases {
+        let args: Vec<&str> = base.iter().copied().chain(extra).collect();
+        let err = fails(&args);
+        assert!(err.contains(expected), "{args:?}: {err}");
+        assert!(!err.contains("hash"), "refused before the run: {err}");
+    }
+    assert!(!Path::new(&same).exists(), "nothing written");
+}

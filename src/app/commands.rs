@@ -27,10 +27,18 @@ pub fn run(
              --executor virtual or --executor threaded",
         ));
     }
-    if let Some(path) = trace {
-        // Refuse an unwritable target before the run, not after it.
-        super::atomic::AtomicFile::create(path)?;
+    // Every output checked before the run, not after it: its directory, a regular file (not
+    // a FIFO, a device or a directory, which renaming into place would replace), and no two
+    // outputs naming one file (a trace written over the checkpoint destroyed it).
+    let mut plan = super::plan::OutputPlan::new();
+    if let Some(c) = checkpoint {
+        plan.file("--checkpoint", &c.path)?;
     }
+    let trace = match trace {
+        Some(path) => Some(plan.file("--trace", path)?),
+        None => None,
+    };
+    let trace = trace.as_deref();
     let mut options = options.clone();
     options.kernel.trace = trace.is_some();
     if let Err(e) = super::interrupt::install() {

@@ -27,6 +27,7 @@ pub mod interrupt;
 mod main;
 pub mod numbers;
 pub mod output;
+pub mod plan;
 mod registry;
 pub mod usage;
 

@@ -102,7 +102,7 @@ struct Row {
 
 /// Runs the command.
 pub fn experiment(args: &ExperimentArgs) -> Result<()> {
-    super::plan::OutputPlan::new().dir("--out", &args.out)?;
+    soda::app::plan::OutputPlan::new().dir("--out", &args.out)?;
     let stem = args.name.file_stem();
     let csv = args.out.join(format!("{stem}.csv"));
     let svg = args.out.join(format!("{stem}.svg"));

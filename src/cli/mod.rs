@@ -9,7 +9,6 @@ mod experiment;
 mod mpi;
 mod numbers;
 mod output;
-mod plan;
 mod plot;
 mod record;
 mod resume;

@@ -26,7 +26,7 @@ pub struct PlotArgs {
 /// Runs the command: reads the trace and writes the three SVG charts.
 pub fn plot(args: &PlotArgs) -> Result<()> {
     let trace = soda::app::commands::read_trace(&args.trace)?;
-    let mut plan = super::plan::OutputPlan::new();
+    let mut plan = soda::app::plan::OutputPlan::new();
     plan.input("the trace", &args.trace);
     plan.dir("--out", &args.out)?;
     let spacetime = args.out.join("spacetime.svg");

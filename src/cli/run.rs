@@ -5,7 +5,6 @@ use super::checkpoint::{
 };
 use super::exec_args::ExecutorArgs;
 use super::output::print;
-use super::plan::OutputPlan;
 use super::record::Recorder;
 use super::source::{Origin, SceneArgs};
 use anyhow::{bail, Context, Result};
@@ -14,6 +13,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use soda::app::atomic::{self, AtomicFile};
 use soda::app::interrupt;
 use soda::app::output::counted;
+use soda::app::plan::OutputPlan;
 use soda::app::usage;
 use soda::frame::StatesWanted;
 use soda::scene::{parse_inputs, InputScript};

@@ -16,9 +16,9 @@ mod server;
 
 use super::exec_args::{ExecutorArg, ExecutorArgs};
 use super::numbers::whole;
-use super::plan::OutputPlan;
 use super::source::SceneArgs;
 use anyhow::{Context, Result};
+use soda::app::plan::OutputPlan;
 use soda::frame::StatesWanted;
 use soda::scene::{InputScript, SceneFormat};
 

@@ -3,12 +3,12 @@
 //!
 //! [`OutputPlan`] resolves each output (its directory must exist; a symbolic link is followed
 //! to the file it names), refuses an output that is not a regular file (a device, a FIFO, a
-//! directory: outputs are renamed into place, see [`soda::app::atomic`]), two outputs naming the
+//! directory: outputs are renamed into place, see [`crate::app::atomic`]), two outputs naming the
 //! same file, and an output that is one of the command's inputs. It proves each directory
 //! writable by creating (and removing) a file in it.
 
+use super::atomic::temp_path;
 use anyhow::{bail, Context, Result};
-use soda::app::atomic::temp_path;
 use std::path::{Path, PathBuf};
 
 /// The outputs (and inputs) of one command, checked as they are added.
