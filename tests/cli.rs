@@ -1699,3 +1699,30 @@ fn a_model_runs_outputs_are_checked_before_it_runs() {
     }
     assert!(!Path::new(&same).exists(), "nothing written");
 }
+
+/// Resuming a registered model's checkpoint refuses the rigid-body run's outputs it cannot
+/// write, naming them, instead of ignoring them (it exited 0 and wrote none of them).
+#[test]
+fn resuming_a_model_checkpoint_refuses_outputs_it_cannot_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let at = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    let ckpt = at("p.ckpt");
+    ok(&[
+        "run",
+        "--model",
+        "phold",
+        "--entities",
+        "200",
+        "--steps",
+        "20",
+        "--checkpoint",
+        &ckpt,
+    ]);
+    let (trace, csv) = (at("t.json"), at("c.csv"));
+    let err = usage_error(&[
+        "resume", &ckpt, "--steps", "30", "--trace", &trace, "--csv", &csv,
+    ]);
+    assert!(err.contains("--csv, --trace cannot be written"), "{err}");
+    assert!(!Path::new(&trace).exists() && !Path::new(&csv).exists());
+    ok(&["resume", &ckpt, "--steps", "30"]);
+}

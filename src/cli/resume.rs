@@ -62,6 +62,28 @@ pub fn resume(args: &ResumeArgs, matches: &ArgMatches) -> Result<()> {
     if let Ok(text) = std::fs::read_to_string(&args.file) {
         if let Ok(model) = soda::checkpoint::model_of(&text) {
             if model != super::RIGID_BODIES {
+                // These outputs are the rigid-body run's; a registered model's resume prints
+                // its summary only, so refuse them rather than ignore them.
+                let o = &args.output;
+                let given: Vec<&str> = [
+                    ("--record", o.record.is_some()),
+                    ("--counters", o.counters.is_some()),
+                    ("--csv", o.csv.is_some()),
+                    ("--trace", o.trace.is_some()),
+                    ("--territories", o.territories.is_some()),
+                ]
+                .iter()
+                .filter(|(_, on)| *on)
+                .map(|(flag, _)| *flag)
+                .collect();
+                if !given.is_empty() {
+                    return Err(soda::app::usage(format!(
+                        "{} cannot be written when resuming a checkpoint of the model `{model}`: \
+                         a registered model's resume prints its summary (and --json) only; drop {}",
+                        given.join(", "),
+                        if given.len() == 1 { "it" } else { "them" }
+                    )));
+                }
                 let options = if executor_given(matches) {
                     Some(args.executor.options()?)
                 } else {
