@@ -1726,3 +1726,36 @@ fn resuming_a_model_checkpoint_refuses_outputs_it_cannot_write() {
     assert!(!Path::new(&trace).exists() && !Path::new(&csv).exists());
     ok(&["resume", &ckpt, "--steps", "30"]);
 }
+
+/// `verify`'s schedule seeds must all exist: near `u64::MAX` the range was cut short
+/// silently (one seed instead of three), or emptied into a misleading diagnosis.
+#[test]
+fn verify_refuses_schedule_seeds_beyond_the_largest() {
+    let err = usage_error(&[
+        "verify",
+        "--objects",
+        "10",
+        "--first-schedule",
+        "18446744073709551614",
+        "--schedules",
+        "3",
+    ]);
+    assert!(err.contains("needs seeds beyond the largest"), "{err}");
+}
+
+/// `experiment` checks every file it will write into `--out` before it runs: a directory
+/// in the way of its chart is refused at once (it failed the rename after the whole
+/// experiment).
+#[test]
+fn an_experiment_checks_the_files_it_writes_before_it_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("exp");
+    std::fs::create_dir_all(out.join("rp-efficiency.svg")).unwrap();
+    let out = out.to_string_lossy().into_owned();
+    let err = fails(&["experiment", "rp-efficiency", "--quick", "--out", &out]);
+    assert!(
+        err.contains("rp-efficiency.svg") && err.contains("is a directory"),
+        "{err}"
+    );
+    assert!(!Path::new(&out).join("rp-efficiency.csv").exists());
+}

@@ -102,7 +102,10 @@ fn watch(read_end: libc::c_int) {
         }
         if COUNT.load(Ordering::SeqCst) >= 2 {
             super::atomic::discard_all();
-            eprintln!("interrupted again: stopped at once, no output file written");
+            eprintln!(
+                "interrupted again: stopped at once; the files being written were discarded \
+                 (outputs already whole, such as an earlier checkpoint, are kept)"
+            );
             std::process::exit(i32::from(exit_status()));
         }
     }

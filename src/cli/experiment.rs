@@ -102,10 +102,29 @@ struct Row {
 
 /// Runs the command.
 pub fn experiment(args: &ExperimentArgs) -> Result<()> {
-    soda::app::plan::OutputPlan::new().dir("--out", &args.out)?;
+    let mut plan = soda::app::plan::OutputPlan::new();
+    plan.dir("--out", &args.out)?;
     let stem = args.name.file_stem();
     let csv = args.out.join(format!("{stem}.csv"));
     let svg = args.out.join(format!("{stem}.svg"));
+    // Every file the experiment writes into --out, checked before it runs (a directory in
+    // the way of one failed the rename after the whole experiment).
+    let extra: &[&str] = match args.name {
+        ExperimentName::Scalability => &["scalability-model.csv", "scalability-model.svg"],
+        ExperimentName::PeakResistance => &[
+            "peak-resistance-cost.csv",
+            "peak-resistance-cost.svg",
+            "peak-resistance-model.csv",
+            "peak-resistance-gaps.svg",
+        ],
+        _ => &[],
+    };
+    for path in [csv.clone(), svg.clone()]
+        .into_iter()
+        .chain(extra.iter().map(|name| args.out.join(name)))
+    {
+        plan.file("--out", &path)?;
+    }
     let rows = match args.name {
         ExperimentName::Scalability => scalability(args.quick, &svg)?,
         ExperimentName::RawPerformance => raw_performance(args.quick, &svg)?,

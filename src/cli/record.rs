@@ -147,7 +147,15 @@ pub fn warn_if_large(path: &Path, estimate: u64) {
     if estimate <= WARN_BYTES && !too_big {
         return;
     }
-    let gb = |b: u64| format!("{:.1} GB", b as f64 / 1e9);
+    // In GB with a digit after the point, or in MB below a tenth of a GB (a full small
+    // disk read "more than the 0.0 GB free there").
+    let gb = |b: u64| {
+        if b >= 100_000_000 {
+            format!("{:.1} GB", b as f64 / 1e9)
+        } else {
+            format!("{:.1} MB", b as f64 / 1e6)
+        }
+    };
     let mut text = format!(
         "warning: --record {} will take about {} (~{ROW_BYTES} bytes per body per recorded \
          step)",

@@ -511,13 +511,18 @@ pub(super) fn execute(job: Job<'_>) -> Result<()> {
     // first, then the errors.
     let mut failures: Vec<anyhow::Error> = Vec::new();
     if let Some(e) = checkpoint_error {
-        failures.push(e.context(format!(
-            "--checkpoint: a checkpoint was not written (the last whole one is at step {})",
-            checkpoints
-                .as_ref()
-                .and_then(CheckpointWriter::last_written)
-                .map_or("none".into(), |s| s.to_string())
-        )));
+        let last = checkpoints
+            .as_ref()
+            .and_then(CheckpointWriter::last_written);
+        failures.push(
+            e.context(match last {
+                Some(step) => format!(
+                "--checkpoint: a checkpoint was not written (the last whole one is at step {step})"
+            ),
+                None => "--checkpoint: a checkpoint was not written (none was written before it)"
+                    .to_string(),
+            }),
+        );
     }
     let recorded = match record.map(Recorder::finish) {
         Some(Ok((_, frames))) => Some(frames),

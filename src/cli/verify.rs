@@ -144,6 +144,16 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         &PartitionKind::from(args.partition),
         args.partition_seed.is_some(),
     )?;
+    // Seeds FIRST..FIRST+K must all exist: near u64::MAX the range was cut short silently.
+    if args.first_schedule.checked_add(args.schedules).is_none() {
+        return Err(soda::app::usage(format!(
+            "--first-schedule {} with --schedules {} needs seeds beyond the largest, {}: \
+             give a smaller --first-schedule or fewer --schedules",
+            args.first_schedule,
+            args.schedules,
+            u64::MAX
+        )));
+    }
     let threads = args.threads.map_or_else(default_threads, |t| t as usize);
     let mut kernel = args
         .window
