@@ -484,3 +484,47 @@ fn resumed_territory_map_starts_at_the_checkpoint_step() {
         "no map of a step the resumed run did not start from"
     );
 }
+
+/// A checkpoint whose checksum matches but whose run options are out of the command line's
+/// ranges is refused naming the option, not run: `checkpoint_every` 0 divided by zero, 0
+/// worlds panicked.
+#[test]
+fn an_edited_checkpoints_out_of_range_options_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("run.ckpt");
+    ok(&[
+        "run",
+        "--objects",
+        "40",
+        "--steps",
+        "20",
+        "--executor",
+        "virtual",
+        "--checkpoint",
+        s(&file),
+    ]);
+    let text = std::fs::read_to_string(&file).unwrap();
+    let cases: [(&str, fn(&mut serde_json::Value), &str); 3] = [
+        (
+            "every.ckpt",
+            |doc| doc["run"]["checkpoint_every"] = 0.into(),
+            "checkpoint_every is 0",
+        ),
+        (
+            "worlds.ckpt",
+            |doc| doc["run"]["options"]["kernel"]["worlds"] = 0.into(),
+            "options.kernel.worlds is 0",
+        ),
+        (
+            "threads.ckpt",
+            |doc| doc["run"]["options"]["threads"] = 100_000.into(),
+            "options.threads is 100000",
+        ),
+    ];
+    for (name, edit, expected) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, rewritten(&text, edit)).unwrap();
+        let err = fails(&["resume", s(&path), "--steps", "30"]);
+        assert!(err.contains(expected), "{name}: {err}");
+    }
+}

@@ -212,8 +212,43 @@ pub fn read(path: &Path) -> Result<(Checkpoint<RunDescription>, Vec<Body>)> {
     })?;
     let checkpoint = Checkpoint::<RunDescription>::from_text(&text, MODEL)
         .with_context(|| format!("cannot resume from {}", path.display()))?;
+    check_run(&checkpoint.run).with_context(|| {
+        format!(
+            "cannot resume from {}: its run options are out of range (was it edited?); \
+             give the FILE a `soda run --checkpoint FILE` wrote",
+            path.display()
+        )
+    })?;
     let bodies = checkpoint
         .states::<RigidBodyModel>()
         .with_context(|| format!("cannot resume from {}", path.display()))?;
     Ok((checkpoint, bodies))
+}
+
+/// Checks a checkpoint's run options against the ranges `soda run` accepts: a checksum
+/// proves the file whole, not that its options came from the command line (a
+/// `checkpoint_every` of 0 divided by zero, 0 worlds panicked).
+fn check_run(run: &RunDescription) -> Result<()> {
+    let k = &run.options.kernel;
+    let bad = if run.checkpoint_every == 0 {
+        Some(format!(
+            "checkpoint_every is {} (at least 1)",
+            run.checkpoint_every
+        ))
+    } else if !(1..=4096).contains(&k.worlds) {
+        Some(format!("options.kernel.worlds is {} (1 to 4096)", k.worlds))
+    } else if !(1..=256).contains(&run.options.threads) {
+        Some(format!(
+            "options.threads is {} (1 to 256)",
+            run.options.threads
+        ))
+    } else if k.window == 0 {
+        Some("options.kernel.window is 0 (at least 1)".to_string())
+    } else {
+        None
+    };
+    match bad {
+        Some(why) => Err(anyhow::anyhow!("{why}")),
+        None => Ok(()),
+    }
 }
