@@ -504,7 +504,8 @@ fn an_edited_checkpoints_out_of_range_options_are_refused_by_name() {
         s(&file),
     ]);
     let text = std::fs::read_to_string(&file).unwrap();
-    let cases: [(&str, fn(&mut serde_json::Value), &str); 3] = [
+    type Edit = fn(&mut serde_json::Value);
+    let cases: [(&str, Edit, &str); 3] = [
         (
             "every.ckpt",
             |doc| doc["run"]["checkpoint_every"] = 0.into(),
