@@ -52,13 +52,6 @@ pub fn run(
         return Ok(report);
     }
     interrupted(&report, checkpoint.map(|c| c.path.as_path()), written);
-    if let (Some(path), Some(t)) = (trace, &report.trace) {
-        super::atomic::write(path, serde_json::to_string(t)?.as_bytes())?;
-        eprintln!(
-            "wrote the trace to {} (draw it with `plot`)",
-            path.display()
-        );
-    }
     let notes: Vec<String> = match (checkpoint, written) {
         (Some(plan), Some(step)) => vec![format!(
             "checkpoint       {} at step {step}",
@@ -66,7 +59,18 @@ pub fn run(
         )],
         _ => Vec::new(),
     };
+    // The summary and hash first: a trace that cannot be written (a full disk) does not
+    // lose them.
     print_report(model, &report, json, &notes)?;
+    if let (Some(path), Some(t)) = (trace, &report.trace) {
+        super::atomic::write(path, serde_json::to_string(t)?.as_bytes())?;
+        eprintln!(
+            "wrote the trace to {} (draw it with `{} plot {}`)",
+            path.display(),
+            program(),
+            path.display()
+        );
+    }
     Ok(report)
 }
 
@@ -84,7 +88,11 @@ pub fn interrupted(
     super::atomic::discard_all();
     let resume = match (checkpoint, written) {
         (Some(path), Some(at)) => {
-            format!("; `resume {}` continues from step {at}", path.display())
+            format!(
+                "; `{} resume {}` continues from step {at}",
+                program(),
+                path.display()
+            )
         }
         (Some(_), None) => "; no checkpoint was written yet".to_string(),
         _ => String::new(),
@@ -340,4 +348,15 @@ fn mpi_role(mpi: bool) -> Result<(Option<crate::exec::mpi::Session>, bool)> {
 #[cfg(not(feature = "mpi"))]
 fn mpi_role(_mpi: bool) -> Result<(Option<()>, bool)> {
     Ok((None, true))
+}
+
+/// The name this program was started by (`soda`, or a model binary's), for the commands
+/// its messages suggest.
+fn program() -> String {
+    std::env::args_os()
+        .next()
+        .as_deref()
+        .map(std::path::Path::new)
+        .and_then(std::path::Path::file_name)
+        .map_or_else(|| "soda".to_string(), |n| n.to_string_lossy().into_owned())
 }
