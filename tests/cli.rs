@@ -1436,7 +1436,7 @@ fn example_models_run_verify_and_experiment_from_the_cli() {
     }
     let err = usage_error(&["run", "--model", "nope"]);
     assert!(
-        err.contains("no such model") && err.contains("epidemic"),
+        err.contains("no such model") && err.contains("rigid-bodies, epidemic, phold"),
         "{err}"
     );
 }

@@ -476,3 +476,15 @@ fn a_small_ball_may_spin_as_fast_as_it_may_roll() {
         "{error}"
     );
 }
+
+/// A JSON scene saved with a UTF-8 byte-order mark reads as the same scene without it, as
+/// a TOML one does (it failed at line 1, column 1).
+#[test]
+fn a_json_scene_with_a_byte_order_mark_reads_as_without_it() {
+    let json = r#"{"domain": {"min": [-4,-1,-4], "max": [4,8,4]},
+        "bodies": [{"id": 0, "shape": {"type": "ball", "radius": 0.5}, "position": [0,2,0]}]}"#;
+    let plain = parse_scene(json, SceneFormat::Json, "plain.json").unwrap();
+    let marked = parse_scene(&format!("\u{feff}{json}"), SceneFormat::Json, "bom.json").unwrap();
+    assert_eq!(plain.bodies.len(), 1);
+    assert_eq!(format!("{plain:?}"), format!("{marked:?}"));
+}

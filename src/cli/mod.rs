@@ -110,7 +110,21 @@ pub fn main() -> ExitCode {
     let args = help_help(std::env::args_os().collect());
     // Another model than rigid bodies: the generic command line over the example models.
     let result = match model_arg(&args) {
-        Some(m) if m != RIGID_BODIES => soda::app::run_with(&soda::app::Registry::examples(), args),
+        Some(m) if m != RIGID_BODIES => {
+            let registry = soda::app::Registry::examples();
+            if registry.get(&m).is_none() {
+                // The registry knows its own models; this binary also has the rigid bodies.
+                let names: Vec<&str> = std::iter::once(RIGID_BODIES)
+                    .chain(registry.models().map(|r| r.name()))
+                    .collect();
+                eprintln!(
+                    "error: --model {m}: no such model; this binary has: {}",
+                    names.join(", ")
+                );
+                return ExitCode::from(2);
+            }
+            soda::app::run_with(&registry, args)
+        }
         _ => {
             let matches = Cli::command().get_matches_from(args);
             match Cli::from_arg_matches(&matches) {

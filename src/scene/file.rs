@@ -206,6 +206,9 @@ pub(crate) fn toml_message(e: &toml::de::Error, text: &str) -> String {
 /// Parses a JSON scene or input script: on an error, the message names the field's path
 /// (`at `bodies[0].material.density`: invalid type: ...`), the line and column, as TOML's do.
 pub(crate) fn from_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
+    // A byte-order mark (some editors save UTF-8 with one) is not JSON, but the text is:
+    // TOML files with one were read, JSON files failed at line 1 column 1.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     if text.trim_start().starts_with('[') {
         return Err(
             "the file is a JSON array: a scene or input script is one JSON object \
