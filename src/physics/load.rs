@@ -149,6 +149,13 @@ impl Motion {
     }
 }
 
+impl Row {
+    /// The impulse the row has put on its partner so far (its own, negated).
+    fn on_partner(&self) -> Vec3 {
+        -(self.normal * self.normal_impulse + self.friction_impulse)
+    }
+}
+
 fn relative_velocity(row: &Row, bodies: &[Motion]) -> Vec3 {
     let va = bodies[row.a].point_velocity(&row.ra);
     let vb = match row.b {
@@ -200,7 +207,7 @@ enum Partner {
 
 /// One Gauss–Seidel sweep over `rows` (normal impulse, then Coulomb friction, per row):
 /// every row may close by its gap within the step and must not approach beyond it.
-/// Returns the largest velocity change a row made, m/s.
+/// Returns the largest velocity change a row made, m/s: 0 only if no impulse changed.
 fn sweep(rows: &mut [Row], bodies: &mut [Motion], dt: f32, partner: Partner) -> f32 {
     let mut largest_change = 0.0f32;
     let held = partner == Partner::Held;
@@ -242,7 +249,8 @@ fn sweep(rows: &mut [Row], bodies: &mut [Motion], dt: f32, partner: Partner) -> 
             let d = next - row.normal_impulse;
             apply(row, bodies, &(n * d));
             row.normal_impulse = next;
-            largest_change = largest_change.max(d.abs() * w);
+            // Never 0 after a change (an underflow), so 0 means the sweep changed nothing.
+            largest_change = largest_change.max(d.abs() * w).max(f32::MIN_POSITIVE);
         }
         if row.friction <= 0.0 {
             continue;
@@ -268,7 +276,9 @@ fn sweep(rows: &mut [Row], bodies: &mut [Motion], dt: f32, partner: Partner) -> 
             apply(row, bodies, &d);
             row.friction_impulse = next;
             let dn = d.norm();
-            largest_change = largest_change.max(dn * mass_along(row, bodies, &(d / dn)));
+            largest_change = largest_change
+                .max(dn * mass_along(row, bodies, &(d / dn)))
+                .max(f32::MIN_POSITIVE);
         }
     }
     largest_change
@@ -287,33 +297,33 @@ fn start_from_shock_propagation(
     system: &LoadSystem<'_>,
     rows: &mut [Row],
     bodies: &mut [Motion],
+    holds: usize,
     starts: &[usize],
     dt: f32,
 ) {
-    // The lower body's holds are the rows before the first upper body's; each upper
-    // body's rows (its environment's, then the lower body's) end where its manifold does.
-    let holds = rows
-        .iter()
-        .take_while(|r| r.a == 0 && r.b.is_none())
-        .count();
-    for _ in 0..START_SWEEPS {
-        sweep(&mut rows[..holds], bodies, dt, Partner::Moves);
-    }
+    // `rows[..holds]` are the lower body's holds; each upper body's rows (its
+    // environment's, then the lower body's) end where its manifold does.
+    settle(&mut rows[..holds], bodies, dt, Partner::Moves);
     let mut from = holds;
     for (u, upper) in system.uppers.iter().enumerate() {
         let to = starts[u] + upper.manifold.local.len();
-        for _ in 0..START_SWEEPS {
-            sweep(&mut rows[from..to], bodies, dt, Partner::Held);
-        }
+        settle(&mut rows[from..to], bodies, dt, Partner::Held);
         // The reaction on the lower body.
         for row in &rows[starts[u]..to] {
-            let on_lower = -(row.normal * row.normal_impulse + row.friction_impulse);
-            bodies[0].apply(&row.rb, &on_lower);
+            bodies[0].apply(&row.rb, &row.on_partner());
         }
         from = to;
     }
+    settle(&mut rows[..holds], bodies, dt, Partner::Moves);
+}
+
+/// Up to [`START_SWEEPS`] sweeps over `rows`, stopping after one that changed nothing (the
+/// next would change nothing either: the same rows, the same velocities).
+fn settle(rows: &mut [Row], bodies: &mut [Motion], dt: f32, partner: Partner) {
     for _ in 0..START_SWEEPS {
-        sweep(&mut rows[..holds], bodies, dt, Partner::Moves);
+        if sweep(rows, bodies, dt, partner) == 0.0 {
+            break;
+        }
     }
 }
 
@@ -333,6 +343,7 @@ pub(crate) fn solve_load(system: &LoadSystem<'_>, gravity: Vec3, dt: f32) -> Vec
     for set in &system.holds {
         immovable_rows(&mut rows, 0, lower, set);
     }
+    let holds = rows.len();
     // Where each upper body's rows with the lower body start.
     let mut starts = Vec::with_capacity(system.uppers.len());
     for (u, upper) in system.uppers.iter().enumerate() {
@@ -366,7 +377,7 @@ pub(crate) fn solve_load(system: &LoadSystem<'_>, gravity: Vec3, dt: f32) -> Vec
             });
         }
     }
-    start_from_shock_propagation(system, &mut rows, &mut bodies, &starts, dt);
+    start_from_shock_propagation(system, &mut rows, &mut bodies, holds, &starts, dt);
     for _ in 0..LOAD_SWEEPS {
         if sweep(&mut rows, &mut bodies, dt, Partner::Moves) < LOAD_TOLERANCE {
             break;
@@ -384,7 +395,7 @@ pub(crate) fn solve_load(system: &LoadSystem<'_>, gravity: Vec3, dt: f32) -> Vec
             let mut point_velocities = SmallVec::new();
             for row in &rows[range] {
                 // The impulse on the lower body: the row's, negated.
-                let on_lower = -(row.normal * row.normal_impulse + row.friction_impulse);
+                let on_lower = row.on_partner();
                 dv += on_lower;
                 torque += row.rb.cross(&on_lower);
                 let n = row.normal;
